@@ -1,0 +1,33 @@
+# Two entry points that work on a fresh machine with nothing but Python:
+#   make demo   a short run on Pinball: TensorBoard logs and a learning-curve figure under runs/demo
+#   make test   the whole test suite
+# Both create .venv on first use. torch is pinned first so pip takes the local CPU build
+# instead of pulling several GB of CUDA wheels.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+TORCH_PIN := torch==2.13.0
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet $(TORCH_PIN)
+	$(PY) -m pip install --quiet -e ".[dev,bench]"
+	touch $@
+
+.PHONY: install test demo lint bench
+install: $(VENV)/.installed
+
+test: $(VENV)/.installed
+	$(PY) -m pytest
+
+lint: $(VENV)/.installed
+	$(VENV)/bin/ruff check .
+
+demo: $(VENV)/.installed
+	$(VENV)/bin/skillchain train --agent flat --map pinball_simple_single --runs 8 --episodes 30 --seed 0 --out runs/demo --overwrite
+	@echo "TensorBoard: $(VENV)/bin/tensorboard --logdir runs/demo/tb ; figure: runs/demo/learning_curve.png"
+
+bench: $(VENV)/.installed
+	$(PY) benchmarks/env_throughput.py
+	$(PY) benchmarks/train_throughput.py

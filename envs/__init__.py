@@ -1,0 +1,1 @@
+"""Environments for skillchain_torch (installed as ``skillchain_torch.envs``)."""

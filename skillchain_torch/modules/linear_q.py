@@ -1,0 +1,96 @@
+"""Linear action values ``Q(s, d) = w_d . phi(s)`` for a population of agents.
+
+Example:
+    >>> import torch
+    >>> head = LinearQHead(num_features=3, num_decisions=2, population=4)
+    >>> head.weight.shape
+    torch.Size([4, 2, 3])
+    >>> phi = torch.ones(4, 3, dtype=torch.float64)
+    >>> step = torch.full((4, 3), 0.5, dtype=torch.float64)
+    >>> head.add_to_decision(torch.tensor([1, 0, 1, 0]), step)
+    >>> head(phi)[0].tolist(), head.q_value(phi, torch.tensor([1, 1, 0, 0])).tolist()
+    ([0.0, 1.5], [1.5, 0.0, 0.0, 1.5])
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from skillchain_torch.invariant import rowwise_dot
+
+
+class LinearQHead(nn.Module):
+    """Population-batched linear Q-function over a fixed set of decisions.
+
+    Args:
+        num_features: F, the length of the feature vector ``phi(s)``.
+        num_decisions: D, fixed at construction. For skill chaining this is the 5 primitive
+            actions plus K option slots (``decision = 5 + k`` is slot k); slots that do not hold
+            a usable option yet are masked out by the caller's ``available`` mask, so the weight
+            shape never changes while options are created.
+        population: P, the number of independent agents.
+        dtype, device: of the weights (float64 default, as in the reference implementation).
+
+    The weights ``weight [P, D, F]`` (zeros) are a *buffer*, not a Parameter: linear TD methods
+    apply closed-form updates (see ``SarsaUpdate``), no autograd graph is ever built, and a buffer
+    still travels with ``.to()`` and ``state_dict()``.
+
+    All products are elementwise followed by a sum over the contiguous feature dim, never a
+    ``bmm``/``matmul`` across the population, so agent p's values are bit-identical whether it
+    runs alone or in a population.
+    """
+
+    def __init__(
+        self,
+        num_features: int,
+        num_decisions: int,
+        population: int,
+        dtype: torch.dtype = torch.float64,
+        device: torch.device | str | None = None,
+    ):
+        super().__init__()
+        self.num_features = num_features
+        self.num_decisions = num_decisions
+        self.population = population
+        weight = torch.zeros(population, num_decisions, num_features, dtype=dtype, device=device)
+        self.register_buffer("weight", weight)
+
+    def _check_phi(self, phi: Tensor) -> None:
+        if phi.shape != (self.population, self.num_features):
+            raise ValueError(
+                f"phi must be [P={self.population}, F={self.num_features}], got {tuple(phi.shape)}"
+            )
+
+    def forward(self, phi: Tensor) -> Tensor:
+        """Q values of every decision: ``phi [P, F] -> q [P, D]``."""
+        self._check_phi(phi)
+        return rowwise_dot(self.weight, phi[:, None, :].to(self.weight.dtype))
+
+    def q_value(self, phi: Tensor, decision: Tensor) -> Tensor:
+        """``Q(s_p, decision_p)`` for each agent: ``[P]``; bit-equal to ``forward`` gathered."""
+        self._check_phi(phi)
+        rows = self.weight[torch.arange(self.population, device=decision.device), decision]
+        return rowwise_dot(rows, phi.to(self.weight.dtype))
+
+    @torch.no_grad()
+    def add_to_decision(self, decision: Tensor, increment: Tensor, mask: Tensor | None = None):
+        """``weight[p, decision[p]] += increment[p]`` for agents with ``mask[p]`` (default all).
+
+        Each agent touches only its own row, so the update is per-agent elementwise. Agents
+        outside the mask may carry any decision index (e.g. -1); their weights stay untouched.
+        """
+        agents = torch.arange(self.population, device=self.weight.device)
+        if mask is None:
+            mask = torch.ones(self.population, dtype=torch.bool, device=self.weight.device)
+        decision = torch.where(mask, decision, torch.zeros_like(decision))
+        rows = self.weight[agents, decision]
+        self.weight[agents, decision] = torch.where(
+            mask[:, None], rows + increment.to(rows.dtype), rows
+        )
+
+    def extra_repr(self) -> str:
+        return (
+            f"num_features={self.num_features}, num_decisions={self.num_decisions}, "
+            f"population={self.population}"
+        )

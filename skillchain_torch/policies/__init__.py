@@ -1,0 +1,10 @@
+"""Decision rules over primitives and options."""
+
+from skillchain_torch.policies.epsilon_greedy import (
+    NUM_UNIFORMS,
+    EpsilonGreedy,
+    EpsilonGreedyModule,
+    epsilon_greedy,
+)
+
+__all__ = ["NUM_UNIFORMS", "EpsilonGreedy", "EpsilonGreedyModule", "epsilon_greedy"]
