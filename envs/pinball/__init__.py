@@ -9,10 +9,20 @@ Example:
     torch.Size([4, 10, 4])
 """
 
+from .env import PinballEnv
+from .gym_adapter import GYM_IDS, GymPinballEnv, register_gym_envs
 from .maps import MAP_NAMES, PinballMap, load_map
 from .physics import ACTION_NAMES, NUM_ACTIONS, observation, pinball_step, pinball_step_events
+from .render import plot_trajectories, render_frame
+
+register_gym_envs()
 
 __all__ = [
+    "PinballEnv",
+    "GymPinballEnv",
+    "GYM_IDS",
+    "render_frame",
+    "plot_trajectories",
     "MAP_NAMES",
     "PinballMap",
     "load_map",

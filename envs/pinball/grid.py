@@ -58,6 +58,8 @@ class CollisionGrid:
     cell_size: float
     clearance: torch.Tensor  # [G*G] float64
     cell_edges: torch.Tensor  # [G*G, K] int64, -1 = none
+    edge_geometry: torch.Tensor  # [E + 1, 5] float64: ax, ay, ex, ey, |e|^2; last row: padding
+    edge_polygon: torch.Tensor  # [E + 1] int64; last row -1
 
     @classmethod
     def build(cls, pinball_map: PinballMap, resolution: int = 128) -> CollisionGrid:
@@ -88,11 +90,26 @@ class CollisionGrid:
         k = max(int(near.sum(dim=1).max().item()) if near.numel() else 0, 1)
         # Sort so each cell's candidate edges come first, in file order (stable).
         order = torch.argsort((~near).to(torch.int8), dim=1, stable=True)[:, :k]
-        cell_edges = torch.where(torch.gather(near, 1, order), order, -1) if near.numel() else (
-            torch.full((centres.shape[0], 1), -1, dtype=torch.long)
+        cell_edges = (
+            torch.where(torch.gather(near, 1, order), order, -1)
+            if near.numel()
+            else (torch.full((centres.shape[0], 1), -1, dtype=torch.long))
         )
+        # The padding row (index -1) is a degenerate edge far off the board: never in contact.
+        e = end - start
+        geometry = torch.cat([start, e, (e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1])[:, None]], -1)
+        far = torch.tensor([[1e6, 1e6, 0.0, 0.0, 1.0]], dtype=f64)
+        geometry = torch.cat([geometry, far])
+        polygon = torch.cat([pinball_map.edge_polygon.cpu(), torch.tensor([-1])])
         device = pinball_map.edge_start.device
-        return cls(g, h, clearance.to(device), cell_edges.to(device))
+        return cls(
+            g,
+            h,
+            clearance.to(device),
+            cell_edges.to(device),
+            geometry.to(device),
+            polygon.to(device),
+        )
 
     @staticmethod
     def is_free(clearance, vv, r: float):

@@ -96,8 +96,9 @@ def _parse(text: str, source: str) -> dict:
                 at.fail(f"duplicate {kind!r} record (first on line {first_line[kind]})")
             need = 1 if kind == "ball" else 3
             if len(values) != need:
-                at.fail(f"{kind!r} needs exactly {need} number{'s' * (need > 1)} "
-                        f"(got {len(values)})")
+                at.fail(
+                    f"{kind!r} needs exactly {need} number{'s' * (need > 1)} (got {len(values)})"
+                )
             if values[-1] <= 0:
                 at.fail(f"{kind!r} radius must be positive (got {values[-1]!r})")
             first_line[kind], scalars[kind], coords = lineno, values, values[:-1]
@@ -106,8 +107,10 @@ def _parse(text: str, source: str) -> dict:
                 at.fail(f"{kind!r} needs an even number of coordinates (got {len(values)})")
             least = 1 if kind == "start" else 3
             if len(values) < 2 * least:
-                at.fail(f"{kind!r} needs at least {least} x y pair{'s' * (least > 1)} "
-                        f"(got {len(values) // 2})")
+                at.fail(
+                    f"{kind!r} needs at least {least} x y pair{'s' * (least > 1)} "
+                    f"(got {len(values) // 2})"
+                )
             coords = values
         for v in coords:
             if not 0.0 <= v <= 1.0:
@@ -121,15 +124,21 @@ def _parse(text: str, source: str) -> dict:
                 # A repeated vertex gives a zero-length edge, and the closest-point test of
                 # the collision code would divide by its zero length.
                 if points[j] == points[(j + 1) % n]:
-                    at.fail(f"'polygon' vertices {j + 1} and {(j + 1) % n + 1} coincide "
-                            f"{points[j]!r} (zero-length edge)")
+                    at.fail(
+                        f"'polygon' vertices {j + 1} and {(j + 1) % n + 1} coincide "
+                        f"{points[j]!r} (zero-length edge)"
+                    )
             polygons.append(points)
     present = {"ball": "ball" in scalars, "target": "target" in scalars, "start": bool(starts)}
     for kind, example in (("ball", "ball r"), ("target", "target x y R"), ("start", "start x y")):
         if not present[kind]:
             raise ValueError(f"{source}: missing {kind!r} record (a line '{example}')")
-    return {"ball": scalars["ball"][0], "target": scalars["target"], "starts": starts,
-            "polygons": polygons}
+    return {
+        "ball": scalars["ball"][0],
+        "target": scalars["target"],
+        "starts": starts,
+        "polygons": polygons,
+    }
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -161,8 +170,7 @@ class PinballMap:
     source: str
 
     @classmethod
-    def from_string(cls, text: str, name: str = "<string>",
-                    source: str = "<string>") -> PinballMap:
+    def from_string(cls, text: str, name: str = "<string>", source: str = "<string>") -> PinballMap:
         """Parse map text; ``source`` is the name used in error messages.
 
         Example:
@@ -187,10 +195,19 @@ class PinballMap:
             edge_polygon = torch.zeros(0, dtype=torch.int64)
             bbox = torch.zeros(0, 4, dtype=f64)
         tx, ty, tr = parsed["target"]
-        return cls(name=name, ball_radius=parsed["ball"], target=(tx, ty), target_radius=tr,
-                   starts=torch.tensor(parsed["starts"], dtype=f64), polygons=polygons,
-                   edge_start=edge_start, edge_end=edge_end, edge_polygon=edge_polygon,
-                   bbox=bbox, source=source)
+        return cls(
+            name=name,
+            ball_radius=parsed["ball"],
+            target=(tx, ty),
+            target_radius=tr,
+            starts=torch.tensor(parsed["starts"], dtype=f64),
+            polygons=polygons,
+            edge_start=edge_start,
+            edge_end=edge_end,
+            edge_polygon=edge_polygon,
+            bbox=bbox,
+            source=source,
+        )
 
     @classmethod
     def from_file(cls, path) -> PinballMap:
@@ -206,8 +223,9 @@ class PinballMap:
         try:
             text = data.decode("utf-8-sig")
         except UnicodeDecodeError as err:
-            raise ValueError(f"{source}: not UTF-8 text ({err.reason} at byte "
-                             f"{err.start})") from None
+            raise ValueError(
+                f"{source}: not UTF-8 text ({err.reason} at byte {err.start})"
+            ) from None
         name = str(getattr(path, "name", Path(source).name)).removesuffix(".cfg")
         return cls.from_string(text, name=name, source=source)
 
@@ -225,9 +243,14 @@ class PinballMap:
             return t.to(device=device, dtype=dtype)
 
         return dataclasses.replace(
-            self, starts=move(self.starts), polygons=tuple(move(p) for p in self.polygons),
-            edge_start=move(self.edge_start), edge_end=move(self.edge_end),
-            edge_polygon=self.edge_polygon.to(device=device), bbox=move(self.bbox))
+            self,
+            starts=move(self.starts),
+            polygons=tuple(move(p) for p in self.polygons),
+            edge_start=move(self.edge_start),
+            edge_end=move(self.edge_end),
+            edge_polygon=self.edge_polygon.to(device=device),
+            bbox=move(self.bbox),
+        )
 
     @property
     def n_polygons(self) -> int:
@@ -246,9 +269,11 @@ class PinballMap:
         return self.starts.dtype
 
     def __repr__(self) -> str:
-        return (f"PinballMap({self.name!r}, ball_radius={self.ball_radius}, "
-                f"target=({self.target[0]}, {self.target[1]}, r={self.target_radius}), "
-                f"starts={self.starts.shape[0]}, polygons={self.n_polygons})")
+        return (
+            f"PinballMap({self.name!r}, ball_radius={self.ball_radius}, "
+            f"target=({self.target[0]}, {self.target[1]}, r={self.target_radius}), "
+            f"starts={self.starts.shape[0]}, polygons={self.n_polygons})"
+        )
 
 
 def load_map(name: str, device=None, dtype=torch.float64) -> PinballMap:

@@ -17,8 +17,14 @@ import weakref
 import numpy as np
 import torch
 
-__all__ = ["BACKGROUND_COLOR", "BALL_COLOR", "POLYGON_COLOR", "TARGET_COLOR",
-           "plot_trajectories", "render_frame"]
+__all__ = [
+    "BACKGROUND_COLOR",
+    "BALL_COLOR",
+    "POLYGON_COLOR",
+    "TARGET_COLOR",
+    "plot_trajectories",
+    "render_frame",
+]
 
 BACKGROUND_COLOR = (245, 245, 240)
 POLYGON_COLOR = (70, 70, 70)
@@ -67,7 +73,7 @@ def _background(pinball_map, size: int) -> np.ndarray:
     frame[solid] = POLYGON_COLOR
     tx, ty = pinball_map.target
     # Drawn over the obstacles so the goal stays visible even where it overlaps one.
-    frame[(px - tx) ** 2 + (py - ty) ** 2 <= pinball_map.target_radius ** 2] = TARGET_COLOR
+    frame[(px - tx) ** 2 + (py - ty) ** 2 <= pinball_map.target_radius**2] = TARGET_COLOR
     frame.flags.writeable = False
     per_map[size] = frame
     return frame
@@ -132,8 +138,15 @@ def _trajectory_list(trajectories) -> list[np.ndarray]:
     return [_as_numpy(t) for t in trajectories]
 
 
-def plot_trajectories(pinball_map, trajectories, colors=None, ax=None, labels=None,
-                      linewidth: float = 1.5, show_starts: bool = True):
+def plot_trajectories(
+    pinball_map,
+    trajectories,
+    colors=None,
+    ax=None,
+    labels=None,
+    linewidth: float = 1.5,
+    show_starts: bool = True,
+):
     """Plot the board and ball paths; returns the matplotlib ``Axes``.
 
     Args:
@@ -176,10 +189,24 @@ def plot_trajectories(pinball_map, trajectories, colors=None, ax=None, labels=No
         raise ValueError(f"got {len(labels)} labels for {len(trajs)} trajectories")
 
     for poly in pinball_map.polygons:
-        ax.add_patch(Polygon(_as_numpy(poly), closed=True, facecolor=np.array(POLYGON_COLOR)
-                             / 255, edgecolor="none", zorder=1))
-    ax.add_patch(Circle(pinball_map.target, pinball_map.target_radius,
-                        facecolor=np.array(TARGET_COLOR) / 255, edgecolor="none", zorder=2))
+        ax.add_patch(
+            Polygon(
+                _as_numpy(poly),
+                closed=True,
+                facecolor=np.array(POLYGON_COLOR) / 255,
+                edgecolor="none",
+                zorder=1,
+            )
+        )
+    ax.add_patch(
+        Circle(
+            pinball_map.target,
+            pinball_map.target_radius,
+            facecolor=np.array(TARGET_COLOR) / 255,
+            edgecolor="none",
+            zorder=2,
+        )
+    )
     if show_starts:
         s = _as_numpy(pinball_map.starts)
         ax.scatter(s[:, 0], s[:, 1], marker="s", s=30, color="black", zorder=4, label=None)
@@ -191,8 +218,7 @@ def plot_trajectories(pinball_map, trajectories, colors=None, ax=None, labels=No
         color = f"C{i % 10}" if colors is None else colors[i]
         label = None if labels is None else labels[i]
         if _is_single_color(color):
-            ax.plot(xy[:, 0], xy[:, 1], color=color, linewidth=linewidth, label=label,
-                    zorder=3)
+            ax.plot(xy[:, 0], xy[:, 1], color=color, linewidth=linewidth, label=label, zorder=3)
             continue
         from matplotlib.colors import to_rgba_array
 
@@ -201,8 +227,11 @@ def plot_trajectories(pinball_map, trajectories, colors=None, ax=None, labels=No
         if len(rgba) not in (len(xy), n_seg):
             raise ValueError(f"trajectory {i} has {len(xy)} steps but {len(rgba)} colours")
         segments = np.stack([xy[:-1], xy[1:]], axis=1)  # [T-1, 2, 2]
-        ax.add_collection(LineCollection(segments, colors=rgba[:n_seg], linewidths=linewidth,
-                                         label=label, zorder=3))
+        ax.add_collection(
+            LineCollection(
+                segments, colors=rgba[:n_seg], linewidths=linewidth, label=label, zorder=3
+            )
+        )
 
     ax.set_xlim(0.0, 1.0)
     ax.set_ylim(1.0, 0.0)  # set, not invert_yaxis(): calling twice on one ax must not flip back

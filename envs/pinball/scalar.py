@@ -53,8 +53,13 @@ class ScalarBoard:
         cells = [tuple(i for i in row if i >= 0) for row in grid.cell_edges.cpu().tolist()]
         tr = pinball_map.target_radius
         return cls(
-            pinball_map.ball_radius, tuple(pinball_map.target), tr * tr, tuple(edges),
-            grid.clearance.double().cpu().tolist(), cells, grid,
+            pinball_map.ball_radius,
+            tuple(pinball_map.target),
+            tr * tr,
+            tuple(edges),
+            grid.clearance.double().cpu().tolist(),
+            cells,
+            grid,
         )
 
     def cell(self, x: float, y: float) -> int:
@@ -101,7 +106,17 @@ def step_one(state, action: int, board: ScalarBoard):
             y += dy
         return (x, y, vx * DRAG, vy * DRAG), False, events
 
-    candidates = [board.edges[i] for i in board.cell_edges[cell]]
+    # Keep the candidate edges this step can reach: a ball travels at most 21 |v| r / 20.
+    reach = r + 21.0 * math.sqrt(vx * vx + vy * vy) * r / SUBSTEPS + 1e-9
+    reach2 = reach * reach
+    candidates = []
+    for i in board.cell_edges[cell]:
+        ax, ay, ex, ey, ee, _ = edge = board.edges[i]
+        t = ((x - ax) * ex + (y - ay) * ey) / ee
+        t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+        dx, dy = x - (ax + ex * t), y - (ay + ey * t)
+        if dx * dx + dy * dy <= reach2:
+            candidates.append(edge)
     tx, ty = board.target
     r2 = r * r
     j = 0
@@ -112,7 +127,7 @@ def step_one(state, action: int, board: ScalarBoard):
         vv = vx * vx + vy * vy
         for ax, ay, ex, ey, ee, poly in candidates:
             t = ((x - ax) * ex + (y - ay) * ey) / ee
-            t = min(max(t, 0.0), 1.0)
+            t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
             dx = x - (ax + ex * t)
             dy = y - (ay + ey * t)
             dist2 = dx * dx + dy * dy

@@ -10,8 +10,7 @@ from hypothesis import strategies as st
 
 from skillchain_torch.envs.pinball.maps import MAP_NAMES, PinballMap, load_map
 
-SETTINGS = settings(max_examples=200, deadline=None,
-                    suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 GOOD = "ball 0.02\ntarget 0.9 0.2 0.04\nstart 0.2 0.9\npolygon 0.1 0.1 0.3 0.1 0.2 0.3\n"
 REAL_TEXTS = {n: Path(load_map(n).source).read_text() for n in MAP_NAMES}
 
@@ -34,8 +33,14 @@ def naive_records(text):
 
 
 def test_map_names():
-    assert MAP_NAMES == ("pinball_box", "pinball_empty", "pinball_hard_single",
-                         "pinball_hard_two_starts", "pinball_medium", "pinball_simple_single")
+    assert MAP_NAMES == (
+        "pinball_box",
+        "pinball_empty",
+        "pinball_hard_single",
+        "pinball_hard_two_starts",
+        "pinball_medium",
+        "pinball_simple_single",
+    )
 
 
 @pytest.mark.parametrize("name", MAP_NAMES)
@@ -81,8 +86,12 @@ def test_hard_maps():
 
 def test_medium_has_duplicated_polygon():
     m = load_map("pinball_medium")
-    dups = [(i, j) for i in range(m.n_polygons) for j in range(i + 1, m.n_polygons)
-            if torch.equal(m.polygons[i], m.polygons[j])]
+    dups = [
+        (i, j)
+        for i in range(m.n_polygons)
+        for j in range(i + 1, m.n_polygons)
+        if torch.equal(m.polygons[i], m.polygons[j])
+    ]
     assert dups == [(5, 8)]
     assert m.polygons[5][0, 0].item() == 0.33399999999999996
 
@@ -111,8 +120,10 @@ def test_to_casts_and_keeps_values():
 
 
 def test_whitespace_crlf_bom_and_ignored_lines():
-    text = ("\ufeffball\t0.02  \r\n\r\n# comment 1 2\r\ndrag 0.9\r\ntarget 0.9   0.2 0.04\r\n"
-            "start 0.2 0.9 \r\nstart 0.1 0.1\r\npolygon 0.1 0.1 0.3 0.1 0.2 0.3")
+    text = (
+        "\ufeffball\t0.02  \r\n\r\n# comment 1 2\r\ndrag 0.9\r\ntarget 0.9   0.2 0.04\r\n"
+        "start 0.2 0.9 \r\nstart 0.1 0.1\r\npolygon 0.1 0.1 0.3 0.1 0.2 0.3"
+    )
     m = PinballMap.from_string(text)
     assert m.starts.tolist() == [[0.2, 0.9], [0.1, 0.1]]  # start lines are concatenated
     assert m.n_polygons == 1 and m.ball_radius == 0.02
@@ -140,31 +151,45 @@ ERRORS = [
     (_replace_line(1, "ball 0.02 0.03"), r"line 1: 'ball' needs exactly 1 number \(got 2\)"),
     (_replace_line(1, "ball"), r"line 1: 'ball' needs exactly 1 number \(got 0\)"),
     (_replace_line(2, "target 0.9 0.2"), r"line 2: 'target' needs exactly 3 numbers \(got 2\)"),
-    (_replace_line(3, "start 0.2 0.9 0.5"),
-     r"line 3: 'start' needs an even number of coordinates \(got 3\)"),
+    (
+        _replace_line(3, "start 0.2 0.9 0.5"),
+        r"line 3: 'start' needs an even number of coordinates \(got 3\)",
+    ),
     (_replace_line(3, "start"), r"line 3: 'start' needs at least 1 x y pair \(got 0\)"),
-    (_replace_line(4, "polygon 0.1 0.1 0.3 0.1 0.2"),
-     r"line 4: 'polygon' needs an even number of coordinates \(got 5\)"),
-    (_replace_line(4, "polygon 0.1 0.1 0.3 0.1"),
-     r"line 4: 'polygon' needs at least 3 x y pairs \(got 2\)"),
+    (
+        _replace_line(4, "polygon 0.1 0.1 0.3 0.1 0.2"),
+        r"line 4: 'polygon' needs an even number of coordinates \(got 5\)",
+    ),
+    (
+        _replace_line(4, "polygon 0.1 0.1 0.3 0.1"),
+        r"line 4: 'polygon' needs at least 3 x y pairs \(got 2\)",
+    ),
     (_replace_line(1, "ball abc"), r"line 1: 'abc' is not a number"),
     (_replace_line(2, "target 0.9 0.2 1_0"), r"line 2: '1_0' is not a number"),
     (_replace_line(3, "start 0.2 0x1"), r"line 3: '0x1' is not a number"),
     (_replace_line(3, "start nan 0.9"), r"line 3: 'nan' is not a finite number"),
     (_replace_line(1, "ball inf"), r"line 1: 'inf' is not a finite number"),
-    (_replace_line(4, "polygon 0.1 1e999 0.3 0.1 0.2 0.3"),
-     r"line 4: '1e999' is not a finite number"),
-    (_replace_line(3, "start 1.5 0.9"),
-     r"line 3: coordinate 1\.5 is outside the unit square \(allowed range \[0, 1\]\)"),
+    (
+        _replace_line(4, "polygon 0.1 1e999 0.3 0.1 0.2 0.3"),
+        r"line 4: '1e999' is not a finite number",
+    ),
+    (
+        _replace_line(3, "start 1.5 0.9"),
+        r"line 3: coordinate 1\.5 is outside the unit square \(allowed range \[0, 1\]\)",
+    ),
     (_replace_line(4, "polygon 0.1 -0.1 0.3 0.1 0.2 0.3"), r"line 4: coordinate -0\.1 is outside"),
     (_replace_line(2, "target 0.9 1.2 0.04"), r"line 2: coordinate 1\.2 is outside"),
     (_replace_line(1, "ball 0"), r"line 1: 'ball' radius must be positive \(got 0\.0\)"),
     (_replace_line(1, "ball -0.02"), r"line 1: 'ball' radius must be positive"),
     (_replace_line(2, "target 0.9 0.2 0"), r"line 2: 'target' radius must be positive"),
-    (_replace_line(4, "polygon 0.1 0.1 0.3 0.1 0.3 0.1"),
-     r"line 4: 'polygon' vertices 2 and 3 coincide .*zero-length edge"),
-    (_replace_line(4, "polygon 0.1 0.1 0.3 0.1 0.2 0.3 0.1 0.1"),
-     r"line 4: 'polygon' vertices 4 and 1 coincide"),
+    (
+        _replace_line(4, "polygon 0.1 0.1 0.3 0.1 0.3 0.1"),
+        r"line 4: 'polygon' vertices 2 and 3 coincide .*zero-length edge",
+    ),
+    (
+        _replace_line(4, "polygon 0.1 0.1 0.3 0.1 0.2 0.3 0.1 0.1"),
+        r"line 4: 'polygon' vertices 4 and 1 coincide",
+    ),
     ("\n\r\n" + GOOD.replace("ball 0.02", "ball x"), r"line 3: 'x' is not a number"),
     (GOOD + "\x00", r"pinball_x\.cfg: contains NUL"),
 ]
@@ -220,8 +245,12 @@ NUMBERS = st.one_of(
     st.sampled_from(["nan", "inf", "-inf", "1e999", "-0", "1_0", "0x1p-2", "½", "٠.٥", "1e"]),
     st.text(min_size=1, max_size=4).filter(lambda s: not s.isspace()),
 )
-LINES = st.builds(lambda k, nums, sep: sep.join([k, *nums]), KEYWORDS,
-                  st.lists(NUMBERS, max_size=9), st.sampled_from([" ", "  ", "\t", " \x0b"]))
+LINES = st.builds(
+    lambda k, nums, sep: sep.join([k, *nums]),
+    KEYWORDS,
+    st.lists(NUMBERS, max_size=9),
+    st.sampled_from([" ", "  ", "\t", " \x0b"]),
+)
 
 
 @SETTINGS
@@ -241,8 +270,11 @@ def test_fuzz_token_soup(lines, newline):
 def test_fuzz_mutated_real_files(name, data):
     lines = [line.split(" ") for line in REAL_TEXTS[name].split("\n")]
     for _ in range(data.draw(st.integers(1, 3))):
-        op = data.draw(st.sampled_from(["del_line", "dup_line", "del_tok", "ins_tok",
-                                        "dup_tok", "replace", "truncate"]))
+        op = data.draw(
+            st.sampled_from(
+                ["del_line", "dup_line", "del_tok", "ins_tok", "dup_tok", "replace", "truncate"]
+            )
+        )
         if not lines:
             break
         i = data.draw(st.integers(0, len(lines) - 1))
@@ -256,7 +288,7 @@ def test_fuzz_mutated_real_files(name, data):
             del line[j]
         elif op in ("ins_tok", "replace"):
             tok = data.draw(NUMBERS | KEYWORDS)
-            line[j:j + (op == "replace")] = [tok]
+            line[j : j + (op == "replace")] = [tok]
         elif op == "dup_tok" and line:
             line.insert(j, line[j])
         elif op == "truncate":
@@ -275,26 +307,42 @@ def star_polygon(draw):
     """Random star-shaped polygon: distinct angles around a centre, all inside [0, 1]."""
     cx, cy = draw(st.floats(0.1, 0.9)), draw(st.floats(0.1, 0.9))
     n = draw(st.integers(3, 9))
-    angles = sorted(draw(st.lists(st.floats(0, 2 * math.pi, exclude_max=True), min_size=n,
-                                  max_size=n, unique=True)))
+    angles = sorted(
+        draw(
+            st.lists(
+                st.floats(0, 2 * math.pi, exclude_max=True), min_size=n, max_size=n, unique=True
+            )
+        )
+    )
     radii = draw(st.lists(st.floats(0.001, 0.1), min_size=n, max_size=n))
-    pts = [(cx + r * math.cos(a), cy + r * math.sin(a)) for a, r in zip(angles, radii,
-                                                                       strict=True)]
+    pts = [(cx + r * math.cos(a), cy + r * math.sin(a)) for a, r in zip(angles, radii, strict=True)]
     # Nearby angles can still round to the same point; such polygons are invalid by design.
     pts = [p for k, p in enumerate(pts) if p != pts[k - 1]]
     return pts if len(pts) >= 3 and pts[0] != pts[-1] else [(0.1, 0.1), (0.2, 0.1), (0.1, 0.2)]
 
 
 @SETTINGS
-@given(RADIUS, COORD, COORD, RADIUS, st.lists(st.tuples(COORD, COORD), min_size=1, max_size=3),
-       st.lists(star_polygon(), max_size=6), st.sampled_from([" ", "  ", "\t"]),
-       st.sampled_from(["\n", "\r\n", " \n", "\n\n"]), st.booleans())
+@given(
+    RADIUS,
+    COORD,
+    COORD,
+    RADIUS,
+    st.lists(st.tuples(COORD, COORD), min_size=1, max_size=3),
+    st.lists(star_polygon(), max_size=6),
+    st.sampled_from([" ", "  ", "\t"]),
+    st.sampled_from(["\n", "\r\n", " \n", "\n\n"]),
+    st.booleans(),
+)
 def test_valid_maps_round_trip(ball, tx, ty, tr, starts, polygons, sep, newline, trailing):
     def line(kind, values):
         return sep.join([kind, *map(repr, values)])
 
-    lines = [line("ball", [ball]), line("target", [tx, ty, tr]),
-             line("start", [v for s in starts for v in s]), "comment ignored 1 2"]
+    lines = [
+        line("ball", [ball]),
+        line("target", [tx, ty, tr]),
+        line("start", [v for s in starts for v in s]),
+        "comment ignored 1 2",
+    ]
     lines += [line("polygon", [v for p in poly for v in p]) for poly in polygons]
     m = parses_or_value_error(newline.join(lines) + (newline if trailing else ""))
     assert m is not None

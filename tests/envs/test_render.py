@@ -109,8 +109,7 @@ def test_background_is_cached_per_map_and_size(monkeypatch):
     m = load_map("pinball_box")  # a fresh map object: nothing cached yet
     calls = []
     original = render._inside_polygon
-    monkeypatch.setattr(render, "_inside_polygon",
-                        lambda *a: calls.append(1) or original(*a))
+    monkeypatch.setattr(render, "_inside_polygon", lambda *a: calls.append(1) or original(*a))
     first = render_frame(m, size=64)
     assert len(calls) == m.n_polygons
     second = render_frame(m, state=(0.2, 0.9), size=64)
@@ -133,8 +132,10 @@ def test_map_without_polygons_and_float32():
 
 
 def test_plot_trajectories_single_colours():
-    trajs = [np.array([[0.2, 0.9, 0, 0], [0.3, 0.8, 0, 0], [0.4, 0.7, 0, 0]]),
-             torch.tensor([[0.2, 0.9], [0.25, 0.95]])]
+    trajs = [
+        np.array([[0.2, 0.9, 0, 0], [0.3, 0.8, 0, 0], [0.4, 0.7, 0, 0]]),
+        torch.tensor([[0.2, 0.9], [0.25, 0.95]]),
+    ]
     ax = plot_trajectories(SIMPLE, trajs, colors=["red", (0, 0, 1)], labels=["a", "b"])
     assert len(ax.lines) == 2
     assert ax.lines[0].get_xydata().tolist() == [[0.2, 0.9], [0.3, 0.8], [0.4, 0.7]]
@@ -150,8 +151,9 @@ def test_plot_trajectories_single_colours():
 def test_plot_trajectories_per_step_colours():
     traj = torch.tensor([[0.2, 0.9], [0.3, 0.85], [0.4, 0.8], [0.5, 0.7]])
     fig, ax = plt.subplots()
-    out = plot_trajectories(SIMPLE, [traj, traj], ax=ax, show_starts=False,
-                            colors=[["C0", "C0", "C1", "C2"], "black"])
+    out = plot_trajectories(
+        SIMPLE, [traj, traj], ax=ax, show_starts=False, colors=[["C0", "C0", "C1", "C2"], "black"]
+    )
     assert out is ax and len(ax.lines) == 1
     (lc,) = [c for c in ax.collections if isinstance(c, LineCollection)]
     assert len(lc.get_segments()) == 3

@@ -1,0 +1,93 @@
+"""A Gymnasium view of one Pinball environment, registered once per shipped map.
+
+Ids: ``skillchain_torch/Pinball-SimpleSingle-v0``, ``-HardSingle-v0``, ``-HardTwoStarts-v0``,
+``-Medium-v0``, ``-Box-v0`` and ``-Empty-v0`` (importing ``skillchain_torch.envs.pinball``
+registers them).
+
+Observations are the Java descriptor (x, y, (xdot + 1) / 2, (ydot + 1) / 2) in
+``Box(0, 1, (4,), float64)``. Why clipped: right after a reflection a velocity component can
+exceed 1 in magnitude until the next step's clip, so the raw descriptor can leave [0, 1] by up
+to 0.21; the adapter clips it to honour the declared space. The unclipped raw state is in
+``info["state"]``, and :class:`~.env.PinballEnv` reports it unclipped.
+
+Example:
+    >>> import gymnasium as gym
+    >>> import skillchain_torch.envs.pinball  # registers the ids
+    >>> env = gym.make("skillchain_torch/Pinball-SimpleSingle-v0")
+    >>> obs, info = env.reset(seed=0)
+    >>> obs.tolist()
+    [0.2, 0.9, 0.5, 0.5]
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium import spaces
+
+from .maps import MAP_NAMES, PinballMap, load_map
+from .physics import NUM_ACTIONS, pinball_step
+from .render import render_frame
+
+__all__ = ["GymPinballEnv", "GYM_IDS", "register_gym_envs"]
+
+
+def _camel(name: str) -> str:
+    return "".join(part.capitalize() for part in name.removeprefix("pinball_").split("_"))
+
+
+GYM_IDS = {f"skillchain_torch/Pinball-{_camel(name)}-v0": name for name in MAP_NAMES}
+
+
+class GymPinballEnv(gym.Env):
+    """One Pinball environment with the Gymnasium API (CPU, float64).
+
+    Args:
+        map: a shipped map name or a :class:`~.maps.PinballMap`.
+        render_mode: ``"rgb_array"`` or ``None``.
+        max_episode_steps: use ``gym.make(..., max_episode_steps=N)`` (TimeLimit) instead.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+
+    def __init__(self, map: str | PinballMap = "pinball_simple_single", render_mode=None):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.pinball_map = map if isinstance(map, PinballMap) else load_map(map)
+        self.render_mode = render_mode
+        self.observation_space = spaces.Box(0.0, 1.0, shape=(4,), dtype=np.float64)
+        self.action_space = spaces.Discrete(NUM_ACTIONS)
+        self._state = torch.zeros(1, 4, dtype=torch.float64)
+
+    def _obs(self) -> np.ndarray:
+        x, y, vx, vy = self._state[0].tolist()
+        obs = np.array([x, y, (vx + 1.0) / 2.0, (vy + 1.0) / 2.0], dtype=np.float64)
+        return np.clip(obs, 0.0, 1.0)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        starts = self.pinball_map.starts
+        start = starts[int(self.np_random.integers(starts.shape[0]))]
+        self._state = torch.cat([start, torch.zeros(2, dtype=torch.float64)])[None]
+        return self._obs(), {"state": self._state[0].numpy().copy()}
+
+    def step(self, action):
+        if not self.action_space.contains(action):
+            raise ValueError(f"action must be an integer in 0..{NUM_ACTIONS - 1}, got {action!r}")
+        act = torch.tensor([int(action)], dtype=torch.int64)
+        self._state, reward, terminated = pinball_step(self._state, act, self.pinball_map)
+        info = {"state": self._state[0].numpy().copy()}
+        return self._obs(), float(reward[0]), bool(terminated[0]), False, info
+
+    def render(self):
+        if self.render_mode == "rgb_array":
+            return render_frame(self.pinball_map, self._state[0])
+        return None
+
+
+def register_gym_envs() -> None:
+    """Register one Gymnasium id per shipped map (idempotent)."""
+    for env_id, name in GYM_IDS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point=GymPinballEnv, kwargs={"map": name})
