@@ -38,7 +38,7 @@ import torch
 
 from .grid import collision_grid
 from .maps import PinballMap
-from .scalar import scalar_board, step_one
+from .scalar import scalar_board, step_one, substeps
 
 __all__ = ["pinball_step", "pinball_step_events", "NUM_ACTIONS", "ACTION_NAMES", "observation"]
 
@@ -48,6 +48,9 @@ SUBSTEPS = 20
 # Up to this many balls on the CPU, stepping them one by one in Python floats beats torch's
 # per-operation overhead (benchmarks/env_throughput.py measures the crossover).
 SCALAR_MAX_BATCH = 4
+# After the first vectorised pass, at most this many balls with further events are finished in
+# plain floats rather than by more tensor passes (CPU only).
+CONTINUE_MAX_BALLS = 32
 DRAG = 0.995
 GOAL_REWARD = 10000.0
 THRUST_PENALTY = -5.0
@@ -286,7 +289,7 @@ def _resolve_near(p, v, pinball_map: PinballMap, grid, with_events: bool):
         va = torch.where(
             (n_edges == 1)[:, None], reflected, torch.where((n_edges > 1)[:, None], -va, va)
         )
-        hit_poly = torch.where(hit, poly, -1).max(-1).values
+        hit_poly = torch.where(hit, poly, -1).amax(-1)  # (Tensor.max(dim) on int64: ~10 ms!)
         one_polygon = (n_edges > 0) & (
             torch.where(hit, poly, hit_poly[:, None]) == hit_poly[:, None]
         ).all(-1)
@@ -305,6 +308,11 @@ def _resolve_near(p, v, pinball_map: PinballMap, grid, with_events: bool):
             if with_events:
                 events[:, :3] += counts
             alive = go_on.nonzero()[:, 0]
+            if 0 < alive.numel() <= CONTINUE_MAX_BALLS and device.type == "cpu":
+                # Few balls still have events: another ~90-operation tensor pass per event costs
+                # more than finishing them in plain floats (bit-identical, see scalar.py).
+                _finish_in_floats(alive, p, v, j, terminated, events, cand, pinball_map)
+                break
         else:
             p[alive], v[alive], terminated[alive], j[alive] = pa, va, reached, ja + k + 1
             if with_events:
@@ -322,6 +330,28 @@ def _resolve_near(p, v, pinball_map: PinballMap, grid, with_events: bool):
     v = torch.where(moved[:, None], 0.0, v)
     events[:, 3] += moved.long()
     return p, v, terminated, events
+
+
+def _finish_in_floats(alive, p, v, j, terminated, events, cand, pinball_map) -> None:
+    """Run the remaining substeps of balls ``alive`` one by one, writing results in place."""
+    board = scalar_board(pinball_map)
+    rows = alive.tolist()
+    out_p, out_v, out_t, out_e = [], [], [], []
+    for (x, y), (vx, vy), j0, edges in zip(
+        p[alive].tolist(), v[alive].tolist(), j[alive].tolist(), cand[alive].tolist()
+    ):
+        counts = [0, 0, 0, 0]
+        candidates = [board.edges[i] for i in edges if i >= 0]
+        x, y, vx, vy, reached = substeps(x, y, vx, vy, j0, candidates, board, counts)
+        out_p.append((x, y))
+        out_v.append((vx, vy))
+        out_t.append(reached)
+        out_e.append(counts)
+    index = torch.tensor(rows, dtype=torch.long)
+    p[index] = torch.tensor(out_p, dtype=p.dtype)
+    v[index] = torch.tensor(out_v, dtype=v.dtype)
+    terminated[index] = torch.tensor(out_t, dtype=torch.bool)
+    events[index] += torch.tensor(out_e, dtype=torch.long)
 
 
 def _contacts(positions, v, geo, r: float):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from .grid import CollisionGrid, collision_grid
 from .maps import PinballMap
 
-__all__ = ["ScalarBoard", "scalar_board", "step_one"]
+__all__ = ["ScalarBoard", "scalar_board", "step_one", "substeps"]
 
 SUBSTEPS = 20
 DRAG = 0.995
@@ -117,9 +117,35 @@ def step_one(state, action: int, board: ScalarBoard):
         dx, dy = x - (ax + ex * t), y - (ay + ey * t)
         if dx * dx + dy * dy <= reach2:
             candidates.append(edge)
+    x, y, vx, vy, terminated = substeps(x, y, vx, vy, 0, candidates, board, events)
+    if terminated:
+        return (x, y, vx, vy), True, events
+
+    vx, vy = vx * DRAG, vy * DRAG
+    moved = False
+    if x > 1.0:
+        x, moved = 0.95, True
+    elif x < 0.0:
+        x, moved = 0.05, True
+    if y > 1.0:
+        y, moved = 0.95, True
+    elif y < 0.0:
+        y, moved = 0.05, True
+    if moved:
+        vx, vy = 0.0, 0.0
+        events[3] += 1
+    return (x, y, vx, vy), False, events
+
+
+def substeps(x, y, vx, vy, j: int, candidates, board: ScalarBoard, events: list):
+    """Substeps ``j..19`` of one ball near ``candidates``: ``(x, y, vx, vy, terminated)``.
+
+    No drag and no bounds check (the caller's). The tensor path also calls this to finish the
+    few balls that still have events after its first vectorised pass.
+    """
+    r = board.r
     tx, ty = board.target
     r2 = r * r
-    j = 0
     while j < SUBSTEPS:
         x += vx * r / SUBSTEPS
         y += vy * r / SUBSTEPS
@@ -150,20 +176,6 @@ def step_one(state, action: int, board: ScalarBoard):
                 y += vy * r / SUBSTEPS
         gx, gy = x - tx, y - ty
         if gx * gx + gy * gy < board.target_r2:
-            return (x, y, vx, vy), True, events
+            return x, y, vx, vy, True
         j += 1
-
-    vx, vy = vx * DRAG, vy * DRAG
-    moved = False
-    if x > 1.0:
-        x, moved = 0.95, True
-    elif x < 0.0:
-        x, moved = 0.05, True
-    if y > 1.0:
-        y, moved = 0.95, True
-    elif y < 0.0:
-        y, moved = 0.05, True
-    if moved:
-        vx, vy = 0.0, 0.0
-        events[3] += 1
-    return (x, y, vx, vy), False, events
+    return x, y, vx, vy, False
