@@ -1,0 +1,48 @@
+"""Options for a population of agents: slots, policies, initiation sets, termination events.
+
+The pieces (paper sections 2, 4 and 5.1), each batched over ``[P, K]`` (agents x option slots):
+
+- :class:`OptionStatus`: EMPTY / GESTATING / LEARNING / LEARNED per slot.
+- :class:`FourierOptionQHead` (the paper's linear learner) and :class:`MLPOptionQHead` (a
+  ``torch.func``-stacked neural drop-in), both :class:`OptionQHead`.
+- :class:`InitiationClassifier`: logistic regression over polynomial features per slot.
+- Termination predicates: :class:`GoalEvent`, :class:`RegionEvent`, :class:`InitiationSetEvent`,
+  :class:`LambdaEvent`.
+- :class:`OptionBank`: bundles the above with per-slot metadata; save / load / select agents.
+
+The intra-option Q-learning update lives in
+:class:`skillchain_torch.objectives.IntraOptionQLearning`.
+"""
+
+from skillchain_torch.options.bank import FORMAT_VERSION, OptionBank
+from skillchain_torch.options.initiation import InitiationClassifier, reservoir_uniform
+from skillchain_torch.options.q_head import (
+    FourierOptionQHead,
+    MLPOptionQHead,
+    OptionQHead,
+)
+from skillchain_torch.options.status import OptionStatus, slot_mask
+from skillchain_torch.options.termination import (
+    GoalEvent,
+    InitiationSetEvent,
+    LambdaEvent,
+    RegionEvent,
+    TerminationPredicate,
+)
+
+__all__ = [
+    "FORMAT_VERSION",
+    "FourierOptionQHead",
+    "GoalEvent",
+    "InitiationClassifier",
+    "InitiationSetEvent",
+    "LambdaEvent",
+    "MLPOptionQHead",
+    "OptionBank",
+    "OptionQHead",
+    "OptionStatus",
+    "RegionEvent",
+    "TerminationPredicate",
+    "reservoir_uniform",
+    "slot_mask",
+]

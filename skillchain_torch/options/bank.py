@@ -1,0 +1,248 @@
+"""The option bank: K option slots per agent with their status, metadata and three parts.
+
+An option (paper section 2) is a policy, an initiation set and a termination condition. The bank
+holds, batched over ``[P, K]``: the option Q-head (policies), the initiation classifier and, per
+slot, the status (:class:`OptionStatus`), the target event, the parent slot and the creation
+episode. Termination predicates are evaluated by :meth:`OptionBank.target_reached`.
+
+Target of slot ``(p, k)``: if ``parent[p, k] >= 0`` it is the initiation set of agent p's slot
+``parent[p, k]`` (a chain link); otherwise ``target_event[p, k] >= 0`` indexes the caller's list
+of base target events (e.g. ``[GoalEvent(), RegionEvent(...)]``); ``-1`` in both: no target.
+
+Example:
+    >>> import torch
+    >>> bank = OptionBank.build(population=2, slots=3, order=1, capacity=16)
+    >>> bank.allocate(torch.tensor([True, True]), target_event=0, episode=5).tolist()
+    [0, 0]
+    >>> bank.allocate(torch.tensor([False, True]), parent=torch.tensor([-1, 0])).tolist()
+    [-1, 1]
+    >>> bank.status.tolist()                       # 1 = GESTATING
+    [[1, 0, 0], [1, 1, 0]]
+    >>> bank.available(torch.rand(2, 4, dtype=torch.float64)).any().item()  # not executable yet
+    False
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from skillchain_torch.options.initiation import InitiationClassifier
+from skillchain_torch.options.q_head import FourierOptionQHead, MLPOptionQHead, OptionQHead
+from skillchain_torch.options.status import (
+    OptionStatus,
+    agent_index,
+    check_slot_mask,
+    slot_mask,
+)
+from skillchain_torch.options.termination import TerminationPredicate
+
+FORMAT = "skillchain_torch.OptionBank"
+FORMAT_VERSION = 1
+Q_HEADS: dict[str, type[OptionQHead]] = {
+    "FourierOptionQHead": FourierOptionQHead,
+    "MLPOptionQHead": MLPOptionQHead,
+}
+_METADATA = ("status", "target_event", "parent", "created_episode")
+
+
+class OptionBank(nn.Module):
+    """Per-slot option state for a population of P agents with K slots each.
+
+    Args:
+        population: P; slots: K.
+        q_head: an :class:`OptionQHead` with the same P and K (the option policies).
+        classifier: an :class:`InitiationClassifier` with the same P and K.
+
+    Buffers ``[P, K]`` (int64): ``status``, ``target_event`` (-1 none), ``parent`` (-1: the
+    target is a base event such as the goal), ``created_episode`` (-1 for empty slots).
+    ``state_dict()`` holds these plus the parts' state under ``q_head.`` / ``classifier.``.
+    """
+
+    def __init__(self, population: int, slots: int, q_head: OptionQHead,
+                 classifier: InitiationClassifier):  # fmt: skip
+        super().__init__()
+        for part, name in ((q_head, "q_head"), (classifier, "classifier")):
+            if (part.population, part.slots) != (population, slots):
+                raise ValueError(f"{name} is for P={part.population}, K={part.slots}; the bank "
+                                 f"has P={population}, K={slots}")  # fmt: skip
+        self.population, self.slots = population, slots
+        self.q_head = q_head
+        self.classifier = classifier
+        device = classifier.seeds.device
+        self.register_buffer("status", torch.zeros(population, slots, dtype=torch.int64,
+                                                   device=device))  # fmt: skip
+        for name in _METADATA[1:]:
+            self.register_buffer(name, torch.full_like(self.status, -1))
+
+    @classmethod
+    def build(cls, population: int, slots: int = 8, order: int = 3, alpha: float = 0.0005,
+              seed: int | Tensor = 0, device: torch.device | str | None = None,
+              **classifier_kwargs: Any) -> OptionBank:  # fmt: skip
+        """The paper's bank: Fourier option heads and default classifiers."""
+        q_head = FourierOptionQHead(population, slots, order=order, alpha=alpha, device=device)
+        classifier = InitiationClassifier(population, slots, seed=seed, device=device,
+                                          **classifier_kwargs)  # fmt: skip
+        return cls(population, slots, q_head, classifier)
+
+    # ------------------------------------------------------------------------------- queries
+    def live(self) -> Tensor:
+        """``[P, K]``: slots holding an option (status != EMPTY)."""
+        return self.status != OptionStatus.EMPTY
+
+    def executable(self) -> Tensor:
+        """``[P, K]``: options in the repertoire (LEARNING or LEARNED; gestating ones are not)."""
+        return self.status >= OptionStatus.LEARNING
+
+    def available(self, obs: Tensor, contains: Tensor | None = None) -> Tensor:
+        """``[P, K]``: executable options whose initiation set contains ``obs [P, 4]``.
+
+        ``contains`` may pass ``classifier.contains(obs)`` when the caller already has it.
+        """
+        member = self.classifier.contains(obs) if contains is None else contains
+        return self.executable() & member
+
+    def full(self) -> Tensor:
+        """``[P]``: agents with no empty slot left."""
+        return self.live().all(-1)
+
+    def first_empty(self, agents: Tensor | None = None) -> Tensor:
+        """``LongTensor [P]``: each chosen agent's first empty slot, -1 if full or not chosen."""
+        empty = ~self.live()
+        if agents is not None:
+            if agents.dtype != torch.bool or tuple(agents.shape) != (self.population,):
+                raise ValueError(f"agents must be a BoolTensor [P={self.population}]")
+            empty = empty & agents.to(empty.device)[:, None]
+        first = empty.to(torch.int64).argmax(-1)
+        return torch.where(empty.any(-1), first, torch.full_like(first, -1))
+
+    def target_reached(self, obs: Tensor, terminated: Tensor | None = None,
+                       events: Sequence[TerminationPredicate] = (),
+                       contains: Tensor | None = None) -> Tensor:  # fmt: skip
+        """``BoolTensor [P, K]``: each live slot's termination predicate at ``obs`` (= s').
+
+        Args:
+            obs: ``[P, 4]``; terminated: the env's flag ``[P]`` (needed by :class:`GoalEvent`).
+            events: the base target events indexed by ``target_event``.
+            contains: ``classifier.contains(obs)``, if already computed.
+        """
+        reached = torch.zeros_like(self.live())
+        chained = self.parent >= 0
+        if bool(chained.any()):
+            member = self.classifier.contains(obs) if contains is None else contains
+            reached = reached | (chained & member.gather(1, self.parent.clamp(min=0)))
+        base = ~chained & (self.target_event >= 0)
+        for i in torch.unique(self.target_event[base]).tolist():
+            if i >= len(events):
+                raise ValueError(f"target event {i} used by a slot, but only {len(events)} given")
+            fired = events[i](obs, terminated).to(reached.device)
+            reached = reached | (base & (self.target_event == i) & fired[:, None])
+        return reached & self.live()
+
+    # ------------------------------------------------------------------------------- changes
+    @torch.no_grad()
+    def allocate(self, agents: Tensor, target_event: int | Tensor = -1,
+                 parent: int | Tensor = -1, episode: int | Tensor = -1) -> Tensor:  # fmt: skip
+        """Create a GESTATING option in the first empty slot of each agent in ``agents [P]``.
+
+        The slot's Q-head weights and classifier are reset; metadata is set from the (int or
+        ``[P]``) arguments. Returns the slot per agent, -1 where not chosen or full.
+        """
+        slot = self.first_empty(agents)
+        mask = slot_mask(slot >= 0, slot, self.slots)
+        self.q_head.reset_slots(mask)
+        self.classifier.reset_slots(mask)
+        values = {"status": int(OptionStatus.GESTATING), "target_event": target_event,
+                  "parent": parent, "created_episode": episode}  # fmt: skip
+        for name, value in values.items():
+            value = torch.as_tensor(value, dtype=torch.int64, device=self.status.device)
+            buffer = getattr(self, name)
+            buffer.copy_(torch.where(mask, value.expand(self.population)[:, None], buffer))
+        return slot
+
+    @torch.no_grad()
+    def set_status(self, mask: Tensor, status: OptionStatus | int) -> None:
+        """Set the status of the slots in ``mask [P, K]`` (e.g. GESTATING -> LEARNING)."""
+        mask = check_slot_mask(mask, self.population, self.slots).to(self.status.device)
+        self.status[mask] = int(OptionStatus(status))
+
+    @torch.no_grad()
+    def free(self, mask: Tensor) -> None:
+        """Empty the slots in ``mask [P, K]`` and reset their parts."""
+        mask = check_slot_mask(mask, self.population, self.slots).to(self.status.device)
+        self.q_head.reset_slots(mask)
+        self.classifier.reset_slots(mask)
+        self.status[mask] = int(OptionStatus.EMPTY)
+        for name in _METADATA[1:]:
+            getattr(self, name)[mask] = -1
+
+    def select_agents(self, index, seeds: Tensor | None = None) -> OptionBank:
+        """A new bank of agents ``index`` (repeats replicate: ``[p] * P2`` gives P2 copies of
+        agent p's options). ``seeds [P2]`` reseeds the parts' random streams."""
+        index = agent_index(index, self.population)
+        new = type(self)(len(index), self.slots, self.q_head.select_agents(index, seeds),
+                         self.classifier.select_agents(index, seeds))  # fmt: skip
+        for name in _METADATA:
+            getattr(new, name).copy_(getattr(self, name)[index.to(self.status.device)])
+        return new
+
+    # ------------------------------------------------------------------------------- files
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the bank (format version, parts' configs, all state) with ``torch.save``."""
+        torch.save(self._payload(), path)
+
+    def _payload(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "version": FORMAT_VERSION,
+            "population": self.population,
+            "slots": self.slots,
+            "q_head": {"class": type(self.q_head).__name__, "config": dict(self.q_head.config)},
+            "classifier": {"config": dict(self.classifier.config)},
+            "state": {k: v.detach().cpu() for k, v in self.state_dict().items()},
+        }
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, q_head: OptionQHead | None = None,
+             classifier: InitiationClassifier | None = None,
+             device: torch.device | str | None = None) -> OptionBank:  # fmt: skip
+        """Read a file written by :meth:`save`; the parts are rebuilt from the stored configs
+        unless given (then they must match the stored shapes). Raises ``ValueError`` for an
+        unreadable, foreign, other-version or mismatched file."""
+        try:
+            payload = torch.load(path, map_location="cpu", weights_only=True)
+        except Exception as error:  # corrupt or not a torch file
+            raise ValueError(f"{path}: not a readable OptionBank file ({error})") from error
+        if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+            raise ValueError(f"{path}: not an OptionBank file (format {FORMAT!r} expected)")
+        if payload.get("version") != FORMAT_VERSION:
+            raise ValueError(f"{path}: OptionBank format version {payload.get('version')}, this "
+                             f"library reads version {FORMAT_VERSION}")  # fmt: skip
+        try:
+            population, slots = int(payload["population"]), int(payload["slots"])
+            if q_head is None:
+                head_class = Q_HEADS[payload["q_head"]["class"]]
+                q_head = head_class(**payload["q_head"]["config"], device=device)
+            if classifier is None:
+                classifier = InitiationClassifier(**payload["classifier"]["config"],
+                                                  device=device)  # fmt: skip
+            bank = cls(population, slots, q_head, classifier)
+            bank.load_state_dict(payload["state"])
+        except (KeyError, TypeError, RuntimeError, ValueError) as error:
+            raise ValueError(f"{path}: OptionBank file does not match ({error})") from error
+        return bank
+
+    @classmethod
+    def from_agent(cls, path: str | os.PathLike, agent: int, population: int,
+                   seeds: Tensor | None = None, device: torch.device | str | None = None
+                   ) -> OptionBank:  # fmt: skip
+        """Agent ``agent``'s options from a saved population, replicated ``population`` times
+        (e.g. to start a "given options" run)."""
+        return cls.load(path, device=device).select_agents([agent] * population, seeds)
+
+    def extra_repr(self) -> str:
+        return f"population={self.population}, slots={self.slots}"

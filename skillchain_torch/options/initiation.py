@@ -1,0 +1,325 @@
+"""Initiation-set classifiers: logistic regression per option slot (paper section 5.1).
+
+Each slot's initiation set is a logistic regression on 2nd-order polynomial features of the
+observation (15 features), initialised to be true everywhere, trained with learning rate 0.1 and
+100 sweeps each time new data arrives; once learned it is further constrained to points within
+Euclidean distance 0.1 of a positive example.
+
+Example:
+    >>> import torch
+    >>> clf = InitiationClassifier(population=1, slots=2, capacity=64)
+    >>> far = torch.tensor([[0.9, 0.5, 0.5, 0.5]], dtype=torch.float64)
+    >>> clf.contains(far).tolist()                       # no data yet: true everywhere
+    [[True, True]]
+    >>> x = torch.rand(40, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    >>> clf.add_examples(0, 0, x, x[:, 0] < 0.5).tolist()
+    [[True, False]]
+    >>> _ = clf.fit()                                    # 100 sweeps for the slots with new data
+    >>> clf.contains(far).tolist(), clf.sweeps_done.tolist()
+    ([[False, True]], [[100, 0]])
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from skillchain_torch.features import PolynomialFeatures
+from skillchain_torch.invariant import rowwise_dot, rowwise_sum
+from skillchain_torch.options.q_head import _DTYPES, OBS_DIM, dtype_name
+from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask, slot_mask
+from skillchain_torch.rng import GOLDEN_GAMMA, logical_rshift, splitmix64, stream_key
+
+_RESERVOIR_STREAM = stream_key(0x1417)
+REPLACEMENTS = ("reservoir", "ring")
+
+
+def reservoir_uniform(seed: Tensor, slot: Tensor, generation: Tensor, index: Tensor) -> Tensor:
+    """A uniform in [0, 1) that is a pure function of ``(seed, slot, generation, index)``.
+
+    Stateless hashing (SplitMix64 chained over the four integers) rather than a counter: the
+    draw for an agent's ``index``-th example of a slot never depends on other agents or slots.
+    """
+    key = splitmix64(seed ^ _RESERVOIR_STREAM)
+    key = splitmix64(key + slot * GOLDEN_GAMMA)
+    key = splitmix64(key + generation * GOLDEN_GAMMA)
+    return logical_rshift(splitmix64(key + index * GOLDEN_GAMMA), 11).to(torch.float64) * 2.0**-53
+
+
+class InitiationClassifier(nn.Module):
+    """Population-batched logistic-regression initiation sets with bounded example stores.
+
+    Args:
+        population: P agents; slots: K option slots per agent.
+        degree: polynomial degree of the features (paper: 2, 15 features for the 4-d obs).
+        lr: learning rate eta (paper: 0.1).
+        sweeps: gradient sweeps per fit, i.e. per batch of new data (paper: 100).
+        capacity: C, the most examples stored per slot (memory ``[P, K, C, 4]``).
+        distance: radius of the post-learning constraint (paper: 0.1), Euclidean in the 4-d
+            observation ``(x, y, (xdot+1)/2, (ydot+1)/2)`` the classifier sees, so a velocity
+            difference counts half (``distance_dims`` restricts it, e.g. ``(0, 1)`` for position).
+        replacement: ``"reservoir"`` (default): once a slot has seen ``n >= C`` examples, the
+            ``n``-th replaces a uniformly drawn stored one with probability ``C / (n + 1)``, so
+            the store is a uniform sample of everything seen; ``"ring"``: the newest C.
+        seed: int (agent p uses ``seed + p``) or ``LongTensor [P]``: the reservoir's draws are a
+            hash of (agent seed, slot, slot generation, example index), independent of P.
+
+    Parameters ``weight [P, K, F]`` and ``bias [P, K]`` read as ``nn.Linear(F, 1)`` per slot;
+    ``P(s in I_k) = sigmoid(weight . phi(s) + bias)`` and membership is ``logit > 0``. They are
+    trained in closed form (no autograd): a sweep is one full-batch gradient step on the mean
+    log-loss over the slot's stored examples, ``w -= lr * mean((sigmoid(z) - y) * phi)``, so a
+    fit costs ``sweeps * C * F`` per slot whatever the amount of data seen (bounded time;
+    about 0.4 s for 100 slots with full stores of 500 on one CPU thread). The features include
+    the constant 1, so its weight and ``bias`` both act as the intercept, as ``nn.Linear`` over
+    ``PolynomialFeatures`` would. With a cap the distance constraint anchors on the *stored*
+    positives (a uniform subsample under ``"reservoir"``), not on every positive ever seen.
+    All maths is elementwise or :mod:`~skillchain_torch.invariant` reductions, so agent p's
+    numbers are bit-identical alone or in a population.
+
+    Buffers (``[P, K]`` unless noted): ``examples [P, K, C, 4]``, ``labels [P, K, C]`` (bool),
+    ``count`` (stored), ``seen`` (ever added), ``generation`` (resets), ``sweeps_done``,
+    ``trained`` (fitted at least once; untrained slots contain everything), ``constrained``
+    (distance constraint on), ``dirty`` (data added since the last fit), ``seeds [P]``.
+    """
+
+    def __init__(
+        self,
+        population: int,
+        slots: int,
+        degree: int = 2,
+        lr: float = 0.1,
+        sweeps: int = 100,
+        capacity: int = 500,
+        distance: float = 0.1,
+        distance_dims: tuple[int, ...] | list[int] | None = None,
+        replacement: str = "reservoir",
+        seed: int | Tensor = 0,
+        dtype: torch.dtype | str = torch.float64,
+        device: torch.device | str | None = None,
+    ):
+        super().__init__()
+        dtype = _DTYPES[dtype] if isinstance(dtype, str) else dtype
+        if population < 1 or slots < 1 or capacity < 1 or sweeps < 0:
+            raise ValueError("need population, slots, capacity >= 1 and sweeps >= 0")
+        if replacement not in REPLACEMENTS:
+            raise ValueError(f"replacement must be one of {REPLACEMENTS}, got {replacement!r}")
+        dims = tuple(range(OBS_DIM)) if distance_dims is None else tuple(distance_dims)
+        if not dims or any(d < 0 or d >= OBS_DIM for d in dims):
+            raise ValueError(f"distance_dims must be indices of the 4-d observation, got {dims}")
+        self.population, self.slots, self.capacity = population, slots, capacity
+        self.lr, self.sweeps, self.distance = float(lr), int(sweeps), float(distance)
+        self.distance_dims, self.replacement = dims, replacement
+        self._squared_distance = self.distance * self.distance  # no sqrt per stored example
+        self.config: dict[str, Any] = dict(
+            population=population, slots=slots, degree=degree, lr=self.lr, sweeps=self.sweeps,
+            capacity=capacity, distance=self.distance, distance_dims=list(dims),
+            replacement=replacement, dtype=dtype_name(dtype),
+        )  # fmt: skip
+        self.features = PolynomialFeatures(OBS_DIM, degree, dtype=dtype).to(device)
+        self.num_features = self.features.num_features
+        pk = (population, slots)
+        zeros = torch.zeros
+        self.weight = nn.Parameter(zeros(*pk, self.num_features, dtype=dtype, device=device),
+                                   requires_grad=False)  # fmt: skip
+        self.bias = nn.Parameter(zeros(pk, dtype=dtype, device=device), requires_grad=False)
+        self.register_buffer("examples", zeros(*pk, capacity, OBS_DIM, dtype=dtype, device=device))
+        self.register_buffer("labels", zeros(*pk, capacity, dtype=torch.bool, device=device))
+        for name in ("count", "seen", "generation", "sweeps_done"):
+            self.register_buffer(name, zeros(pk, dtype=torch.int64, device=device))
+        for name in ("trained", "constrained", "dirty"):
+            self.register_buffer(name, zeros(pk, dtype=torch.bool, device=device))
+        self.register_buffer("seeds", agent_seeds(seed, population).to(device))
+
+    # ----------------------------------------------------------------------------- membership
+    def _check_obs(self, obs: Tensor) -> Tensor:
+        if tuple(obs.shape) != (self.population, OBS_DIM):
+            raise ValueError(f"obs must be [P={self.population}, 4], got {tuple(obs.shape)}")
+        return obs.to(device=self.weight.device, dtype=self.weight.dtype)
+
+    def logit(self, obs: Tensor) -> Tensor:
+        """``weight . phi(s) + bias`` for every slot: ``obs [P, 4] -> [P, K]``."""
+        phi = self.features(self._check_obs(obs))
+        return rowwise_dot(self.weight, phi[:, None, :]) + self.bias
+
+    def probability(self, obs: Tensor) -> Tensor:
+        """``sigmoid(logit)`` written as ``1 / (1 + exp(-z))`` (layout-invariant)."""
+        return 1.0 / (1.0 + torch.exp(-self.logit(obs)))
+
+    def near_positive(self, obs: Tensor, mask: Tensor | None = None) -> Tensor:
+        """``[P, K]``: within ``distance`` of at least one stored positive example.
+
+        Only the slots in ``mask [P, K]`` (default all) are checked; others read False. The
+        squared distance is compared with ``distance ** 2`` (no square root per example).
+        """
+        obs = self._check_obs(obs)
+        mask = torch.ones_like(self.trained) if mask is None else mask
+        mask = check_slot_mask(mask, self.population, self.slots)
+        if bool(mask.all()):  # every slot: work on the stores in place, no gather
+            examples, count, labels = self.examples, self.count, self.labels
+            point = obs[:, None, :].expand(-1, self.slots, -1)
+        else:
+            pi, ki = mask.nonzero().unbind(-1)
+            examples, count, labels = self.examples[pi, ki], self.count[pi, ki], self.labels[pi, ki]
+            point = obs[pi]
+        squared = None
+        for j in self.distance_dims:  # fixed order, elementwise only: layout-invariant
+            diff = examples[..., j] - point[..., j, None]
+            squared = diff * diff if squared is None else squared + diff * diff
+        stored = torch.arange(self.capacity, device=obs.device) < count[..., None]
+        near = ((squared <= self._squared_distance) & stored & labels).any(-1)
+        if bool(mask.all()):
+            return near
+        out = torch.zeros_like(self.trained)
+        out[pi, ki] = near
+        return out
+
+    def contains(self, obs: Tensor) -> Tensor:
+        """Initiation-set membership ``[P, K]``: true everywhere for an untrained slot, else
+        ``logit > 0`` (``sigmoid > 1/2``), and near a positive example for constrained slots."""
+        member = (self.logit(obs) > 0) | ~self.trained
+        if bool(self.constrained.any()):
+            near = self.near_positive(obs, self.constrained)
+            member = member & (near | ~self.constrained)
+        return member
+
+    # ----------------------------------------------------------------------------- data
+    def add_examples(self, agents: int | Tensor, slots: int | Tensor, obs: Tensor,
+                     labels: Tensor) -> Tensor:  # fmt: skip
+        """Store labelled examples (in order) and mark their slots for refitting.
+
+        Args:
+            agents, slots: int (all examples) or ``LongTensor [N]`` (one per example).
+            obs: ``[N, 4]`` observations; labels: ``[N]`` bool or 0/1 (positive = in the set).
+
+        Returns:
+            ``BoolTensor [P, K]``: the slots that received data.
+        """
+        if obs.ndim != 2 or obs.shape[-1] != OBS_DIM:
+            raise ValueError(f"obs must be [N, 4], got {tuple(obs.shape)}")
+        n, device = obs.shape[0], self.weight.device
+        if labels.shape != (n,):
+            raise ValueError(f"labels must be [N={n}], got {tuple(labels.shape)}")
+        p = torch.as_tensor(agents, dtype=torch.int64, device=device).expand(n)
+        k = torch.as_tensor(slots, dtype=torch.int64, device=device).expand(n)
+        if bool(((p < 0) | (p >= self.population) | (k < 0) | (k >= self.slots)).any()):
+            raise ValueError(f"agent/slot indices out of range for P={self.population}, "
+                             f"K={self.slots}")  # fmt: skip
+        touched = torch.zeros(self.population * self.slots, dtype=torch.bool, device=device)
+        if n == 0:
+            return touched.reshape(self.population, self.slots)
+        flat = p * self.slots + k
+        # Rank of each example among the earlier ones of its slot (stable: insertion order).
+        sorted_flat, order = torch.sort(flat, stable=True)
+        arange = torch.arange(n, device=device)
+        start = torch.ones(n, dtype=torch.bool, device=device)
+        start[1:] = sorted_flat[1:] != sorted_flat[:-1]
+        first = torch.cummax(torch.where(start, arange, torch.zeros_like(arange)), 0).values
+        rank = torch.empty_like(arange)
+        rank[order] = arange - first
+        index = self.seen.reshape(-1)[flat] + rank  # the example's number in its slot's history
+        cap = self.capacity
+        if self.replacement == "ring":
+            position = index % cap
+        else:
+            u = reservoir_uniform(self.seeds[p], k, self.generation[p, k], index)
+            draw = torch.minimum(torch.floor(u * (index + 1).to(u.dtype)).to(torch.int64), index)
+            position = torch.where(index < cap, index, torch.where(draw < cap, draw, -1))
+        # Later examples overwrite earlier ones at the same place, as a sequential loop would.
+        cell = flat * cap + position.clamp(min=0)
+        last = torch.full((self.population * self.slots * cap,), -1, device=device,
+                          dtype=torch.int64)  # fmt: skip
+        last.scatter_reduce_(0, cell[position >= 0], arange[position >= 0], reduce="amax")
+        keep = (position >= 0) & (last[cell] == arange)
+        self.examples.view(-1, OBS_DIM)[cell[keep]] = obs[keep].to(self.examples.dtype)
+        self.labels.view(-1)[cell[keep]] = labels[keep].to(device).to(torch.bool)
+        self.seen.view(-1).index_add_(0, flat, torch.ones_like(flat))
+        self.count.copy_(torch.clamp(self.seen, max=cap))
+        touched[flat] = True
+        touched = touched.reshape(self.population, self.slots)
+        self.dirty |= touched
+        return touched
+
+    # ----------------------------------------------------------------------------- fitting
+    @torch.no_grad()
+    def fit(self, mask: Tensor | None = None) -> Tensor:
+        """Run ``sweeps`` gradient steps on each slot in ``mask`` (default: ``dirty``) that holds
+        data; others are untouched. Returns the ``[P, K]`` mask of slots fitted."""
+        mask = self.dirty if mask is None else check_slot_mask(mask, self.population, self.slots)
+        mask = mask.to(self.weight.device) & (self.count > 0)
+        where = mask.nonzero()
+        if where.shape[0] > 0:
+            pi, ki = where[:, 0], where[:, 1]
+            x = self.features(self.examples[pi, ki])  # [M, C, F]
+            xt = x.transpose(1, 2).contiguous()  # [M, F, C] to reduce over the examples
+            y = self.labels[pi, ki].to(x.dtype)
+            stored = torch.arange(self.capacity, device=x.device) < self.count[pi, ki][:, None]
+            n = self.count[pi, ki].to(x.dtype)
+            w, b = self.weight[pi, ki], self.bias[pi, ki]
+            zero = torch.zeros((), dtype=x.dtype, device=x.device)
+            for _ in range(self.sweeps):
+                z = rowwise_dot(x, w[:, None, :]) + b[:, None]
+                err = torch.where(stored, 1.0 / (1.0 + torch.exp(-z)) - y, zero)  # [M, C]
+                w = w - self.lr * (rowwise_dot(xt, err[:, None, :]) / n[:, None])
+                b = b - self.lr * (rowwise_sum(err) / n)
+            self.weight[pi, ki] = w
+            self.bias[pi, ki] = b
+            self.sweeps_done[pi, ki] += self.sweeps
+            self.trained[pi, ki] = True
+        self.dirty &= ~mask
+        return mask
+
+    # ----------------------------------------------------------------------------- slots
+    def constrain(self, mask: Tensor) -> None:
+        """Turn the distance constraint on for the slots in ``mask [P, K]`` (learned options)."""
+        self.constrained |= check_slot_mask(mask, self.population, self.slots).to(self.seeds.device)
+
+    @torch.no_grad()
+    def reset_slots(self, mask: Tensor) -> None:
+        """Forget the slots in ``mask [P, K]``: no data, zero weights, true everywhere."""
+        mask = check_slot_mask(mask, self.population, self.slots).to(self.seeds.device)
+        self.weight[mask] = 0.0
+        self.bias[mask] = 0.0
+        self.examples[mask] = 0.0
+        self.labels[mask] = False
+        for name in ("count", "seen", "sweeps_done"):
+            getattr(self, name)[mask] = 0
+        for name in ("trained", "constrained", "dirty"):
+            getattr(self, name)[mask] = False
+        self.generation[mask] += 1
+
+    def reset_slot(self, agents: int | Tensor, slot: int | Tensor) -> None:
+        self.reset_slots(slot_mask(agents, slot, self.slots, self.population, self.seeds.device))
+
+    # ----------------------------------------------------------------------------- convergence
+    def snapshot(self) -> Tensor:
+        """A copy of every slot's weights and bias, ``[P, K, F + 1]``."""
+        return torch.cat([self.weight, self.bias[..., None]], dim=-1).detach().clone()
+
+    def weight_change(self, before: Tensor, after: Tensor | None = None) -> Tensor:
+        """Mean absolute change per weight (bias included) between snapshots: ``[P, K]``.
+
+        The paper's convergence test compares it with 0.15 per episode.
+        """
+        after = self.snapshot() if after is None else after
+        if before.shape != after.shape:
+            raise ValueError(f"snapshots differ in shape: {tuple(before.shape)} vs "
+                             f"{tuple(after.shape)}")  # fmt: skip
+        return rowwise_sum(torch.abs(after - before)) / float(after.shape[-1])
+
+    def select_agents(self, index, seeds: Tensor | None = None) -> InitiationClassifier:
+        """A new classifier holding agents ``index`` (repeats allowed), optionally reseeded."""
+        index = agent_index(index, self.population).to(self.seeds.device)
+        new = type(self)(**{**self.config, "population": len(index)}, device=self.seeds.device)
+        state = {name: value[index] for name, value in self.state_dict().items()
+                 if not name.startswith("features.")}  # fmt: skip
+        if seeds is not None:
+            state["seeds"] = torch.as_tensor(seeds, dtype=torch.int64).reshape(-1)
+        new.load_state_dict({**new.state_dict(), **state})
+        return new
+
+    def extra_repr(self) -> str:
+        return ", ".join(f"{k}={v}" for k, v in self.config.items() if k != "dtype") + (
+            f", features={self.num_features}"
+        )

@@ -1,0 +1,233 @@
+"""InitiationClassifier: default true, learning, sweeps, capped store, constraint, invariance."""
+
+import doctest
+import importlib
+import time
+
+import pytest
+import torch
+
+from skillchain_torch.options import InitiationClassifier, reservoir_uniform
+
+F64 = torch.float64
+
+
+def rand(shape, seed):
+    return torch.rand(shape, dtype=F64, generator=torch.Generator().manual_seed(seed))
+
+
+def test_doctest():
+    module = importlib.import_module("skillchain_torch.options.initiation")
+    assert doctest.testmod(module).failed == 0
+
+
+def test_parameterisation_reads_as_logistic_regression():
+    clf = InitiationClassifier(population=3, slots=8)
+    assert clf.weight.shape == (3, 8, 15) and clf.bias.shape == (3, 8)
+    assert {name for name, _ in clf.named_parameters()} == {"weight", "bias"}
+    assert clf.examples.shape == (3, 8, 500, 4)
+    obs = rand((3, 4), 0)
+    z = clf.logit(obs)
+    assert torch.allclose(clf.probability(obs), torch.sigmoid(z), rtol=1e-15)
+
+
+def test_true_everywhere_before_data():
+    clf = InitiationClassifier(population=2, slots=3)
+    for seed in range(5):
+        assert bool(clf.contains(rand((2, 4), seed)).all())
+    clf.add_examples(0, 1, rand((3, 4), 9), torch.zeros(3))  # data but no fit yet
+    assert bool(clf.contains(rand((2, 4), 1)).all())
+
+
+def test_learns_a_linearly_separable_set():
+    clf = InitiationClassifier(population=1, slots=2)
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(3):
+        x = torch.rand(60, 4, dtype=F64, generator=gen)
+        clf.add_examples(0, 0, x, x[:, 0] < 0.5)
+        clf.fit()
+    test = torch.rand(2000, 4, dtype=F64, generator=gen)
+    member = torch.cat([clf.contains(test[i : i + 1])[:, 0] for i in range(0, 2000, 1)])
+    accuracy = (member == (test[:, 0] < 0.5)).to(F64).mean().item()
+    assert accuracy > 0.95
+    assert bool(clf.trained[0, 0]) and not bool(clf.trained[0, 1])
+
+
+def test_fit_runs_sweeps_per_addition_and_only_on_chosen_slots():
+    clf = InitiationClassifier(population=2, slots=2, sweeps=100)
+    clf.add_examples(torch.tensor([0, 0, 1]), torch.tensor([0, 0, 1]), rand((3, 4), 0),
+                     torch.tensor([1, 0, 1]))  # fmt: skip
+    assert clf.dirty.tolist() == [[True, False], [False, True]]
+    before = clf.snapshot()
+    fitted = clf.fit(torch.tensor([[True, True], [False, False]]))
+    assert fitted.tolist() == [[True, False], [False, False]]  # slot (0, 1) has no data
+    assert clf.sweeps_done.tolist() == [[100, 0], [0, 0]]
+    assert torch.equal(clf.snapshot()[1], before[1]) and torch.equal(
+        clf.snapshot()[0, 1], before[0, 1]
+    )
+    assert clf.dirty.tolist() == [[False, False], [False, True]]
+    clf.fit()  # default: the slots with new data
+    assert clf.sweeps_done.tolist() == [[100, 0], [0, 100]]
+    clf.add_examples(0, 0, rand((1, 4), 1), torch.tensor([True]))
+    clf.fit()
+    assert clf.sweeps_done.tolist() == [[200, 0], [0, 100]]
+
+
+def test_sweeps_are_full_batch_gradient_steps():
+    clf = InitiationClassifier(population=1, slots=1, lr=0.5, sweeps=2)
+    x = rand((5, 4), 3)
+    y = torch.tensor([1.0, 0.0, 1.0, 1.0, 0.0], dtype=F64)
+    clf.add_examples(0, 0, x, y)
+    clf.fit()
+    phi = clf.features(x)
+    w, b = torch.zeros(15, dtype=F64), torch.zeros((), dtype=F64)
+    for _ in range(2):
+        err = torch.sigmoid(phi @ w + b) - y
+        w, b = w - 0.5 * (phi.T @ err) / 5, b - 0.5 * err.mean()
+    assert torch.allclose(clf.weight[0, 0], w, rtol=1e-12) and torch.allclose(clf.bias[0, 0], b)
+
+
+@pytest.mark.parametrize("replacement", ["reservoir", "ring"])
+def test_store_is_capped_and_fit_time_bounded(replacement):
+    cap = 50
+    clf = InitiationClassifier(population=2, slots=2, capacity=cap, replacement=replacement)
+    gen = torch.Generator().manual_seed(0)
+    times = []
+    for i in range(12):
+        x = torch.rand(40, 4, dtype=F64, generator=gen)
+        x[:, 3] = i  # tag the batch
+        clf.add_examples(torch.tensor([0] * 30 + [1] * 10), 1, x, x[:, 0] < 0.5)
+        start = time.perf_counter()
+        clf.fit()
+        times.append(time.perf_counter() - start)
+        assert bool((clf.count <= cap).all())
+    assert clf.seen[:, 1].tolist() == [360, 120] and clf.count[:, 1].tolist() == [cap, cap]
+    assert max(times[6:]) < 5 * max(times[1:6]) + 0.05  # no growth with the data seen
+    tags = clf.examples[0, 1, :, 3]
+    if replacement == "ring":  # the newest 50 of agent 0's 360 examples
+        assert sorted(tags.tolist()) == [10.0] * 20 + [11.0] * 30
+    else:  # a spread sample of all batches, old ones included
+        assert float(tags.min()) < 6 and float(tags.max()) >= 9
+
+
+def test_reservoir_keeps_a_uniform_sample():
+    cap, n = 100, 2000
+    clf = InitiationClassifier(population=1, slots=1, capacity=cap, sweeps=0)
+    x = torch.zeros(n, 4, dtype=F64)
+    x[:, 0] = torch.arange(n, dtype=F64)
+    for chunk in torch.split(torch.arange(n), 137):  # several calls, as episodes would
+        clf.add_examples(0, 0, x[chunk], torch.ones(len(chunk)))
+    kept = clf.examples[0, 0, :, 0]
+    assert clf.count.item() == cap and len(set(kept.tolist())) == cap
+    # Uniform over the history: about half the kept examples come from the first half.
+    assert 30 <= int((kept < n / 2).sum()) <= 70
+    # One call with everything gives the same store (the draws are a pure function).
+    one = InitiationClassifier(population=1, slots=1, capacity=cap, sweeps=0)
+    one.add_examples(0, 0, x, torch.ones(n))
+    assert torch.equal(one.examples, clf.examples)
+    u = reservoir_uniform(torch.tensor([3]), torch.tensor([1]), torch.tensor([0]),
+                          torch.arange(5))  # fmt: skip
+    assert bool(((u >= 0) & (u < 1)).all())
+
+
+def test_distance_constraint_excludes_points_far_from_positives():
+    clf = InitiationClassifier(population=1, slots=1, distance=0.1)
+    x = rand((40, 4), 0) * 0.2  # positives in a small corner
+    clf.add_examples(0, 0, x, torch.ones(40))
+    clf.fit()
+    far = torch.tensor([[0.9, 0.9, 0.5, 0.5]], dtype=F64)
+    near = x[:1] + torch.tensor([[0.05, 0.0, 0.0, 0.05]], dtype=F64)
+    assert bool(clf.contains(far)[0, 0]) and bool(clf.contains(near)[0, 0])  # all positive
+    clf.constrain(torch.ones(1, 1, dtype=torch.bool))
+    assert not bool(clf.contains(far)[0, 0]) and bool(clf.contains(near)[0, 0])
+    # The distance is Euclidean over all four observation dims.
+    off = x[:1].clone()
+    off[0, 3] += 0.5
+    assert not bool(clf.near_positive(off)[0, 0])
+    positional = InitiationClassifier(population=1, slots=1, distance_dims=(0, 1))
+    positional.add_examples(0, 0, x, torch.ones(40))
+    assert bool(positional.near_positive(off)[0, 0])
+
+
+def test_negative_examples_do_not_count_as_anchors():
+    clf = InitiationClassifier(population=1, slots=1)
+    clf.add_examples(0, 0, torch.full((1, 4), 0.5, dtype=F64), torch.tensor([False]))
+    assert not bool(clf.near_positive(torch.full((1, 4), 0.5, dtype=F64))[0, 0])
+
+
+def test_weight_change_and_reset():
+    clf = InitiationClassifier(population=2, slots=2)
+    before = clf.snapshot()
+    clf.add_examples(1, 0, rand((10, 4), 0), torch.ones(10))
+    clf.fit()
+    change = clf.weight_change(before)
+    expected = (clf.snapshot() - before).abs().mean(-1)
+    assert torch.allclose(change, expected, rtol=1e-14) and change[1, 0] > 0
+    assert change[0].tolist() == [0.0, 0.0]
+    clf.constrain(torch.tensor([[False, False], [True, False]]))
+    clf.reset_slot(1, 0)
+    assert clf.count[1, 0] == 0 and not bool(clf.trained[1, 0] | clf.constrained[1, 0])
+    assert clf.generation.tolist() == [[0, 0], [1, 0]]
+    assert bool(clf.contains(rand((2, 4), 3)).all())
+
+
+def test_bad_inputs_raise():
+    clf = InitiationClassifier(population=2, slots=3)
+    with pytest.raises(ValueError, match="obs must be"):
+        clf.contains(torch.zeros(3, 4))
+    with pytest.raises(ValueError, match=r"obs must be \[N, 4\]"):
+        clf.add_examples(0, 0, torch.zeros(5, 3), torch.zeros(5))
+    with pytest.raises(ValueError, match="labels"):
+        clf.add_examples(0, 0, torch.zeros(5, 4), torch.zeros(4))
+    with pytest.raises(ValueError, match="out of range"):
+        clf.add_examples(0, 3, torch.zeros(1, 4), torch.zeros(1))
+    with pytest.raises(ValueError, match="mask must be"):
+        clf.fit(torch.ones(2, 2, dtype=torch.bool))
+    with pytest.raises(ValueError, match="replacement"):
+        InitiationClassifier(1, 1, replacement="fifo")
+    with pytest.raises(ValueError, match="snapshots"):
+        clf.weight_change(torch.zeros(1))
+
+
+@pytest.mark.parametrize("cap", [40, 500])
+def test_population_invariance(cap):
+    population, slots = 4, 3
+    together = InitiationClassifier(population, slots, capacity=cap, sweeps=20)
+    alone = [together.select_agents([p]) for p in range(population)]
+    gen = torch.Generator().manual_seed(2)
+    for _ in range(4):
+        n = 60 if cap < 100 else 700
+        agents = torch.randint(0, population, (n,), generator=gen)
+        ks = torch.randint(0, slots, (n,), generator=gen)
+        x = torch.rand(n, 4, dtype=F64, generator=gen)
+        labels = x[:, 0] + 0.3 * x[:, 2] < 0.6
+        together.add_examples(agents, ks, x, labels)
+        together.fit()
+        for p, clf in enumerate(alone):
+            mine = agents == p
+            clf.add_examples(0, ks[mine], x[mine], labels[mine])
+            clf.fit()
+        together.constrain(torch.rand(population, slots, generator=gen) < 0.3)
+        for p, clf in enumerate(alone):
+            clf.constrained.copy_(together.constrained[p : p + 1])
+    obs = torch.rand(population, 4, dtype=F64, generator=gen)
+    logit, member = together.logit(obs), together.contains(obs)
+    for p, clf in enumerate(alone):
+        for name, value in clf.state_dict().items():
+            if not name.startswith("features."):
+                assert torch.equal(value[0], together.state_dict()[name][p]), name
+        assert torch.equal(clf.logit(obs[p : p + 1])[0], logit[p])
+        assert torch.equal(clf.contains(obs[p : p + 1])[0], member[p])
+
+
+def test_near_positive_on_some_slots_equals_the_full_check():
+    clf = InitiationClassifier(population=3, slots=4, capacity=30, distance=0.3)
+    gen = torch.Generator().manual_seed(4)
+    x = torch.rand(200, 4, dtype=F64, generator=gen)
+    clf.add_examples(torch.randint(0, 3, (200,), generator=gen), torch.arange(200) % 4, x,
+                     x[:, 1] < 0.5)  # fmt: skip
+    obs = torch.rand(3, 4, dtype=F64, generator=gen)
+    full = clf.near_positive(obs)
+    assert bool(full.any()) and not bool(full.all())
+    some = torch.rand(3, 4, generator=gen) < 0.5
+    assert torch.equal(clf.near_positive(obs, some), full & some)
