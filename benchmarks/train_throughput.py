@@ -1,0 +1,127 @@
+"""Training throughput of the flat Sarsa agent (environment, decision and update together).
+
+    python benchmarks/train_throughput.py            # P = 1, 10, 100 and a short population run
+    python benchmarks/train_throughput.py --full     # ... and the paper's 100 x 250 run
+    python benchmarks/train_throughput.py --threads 2
+
+Rows: ``PopulationTrainer`` with P agents on pinball_simple_single (paper defaults: order-4
+Fourier basis, alpha 0.001, gamma 1, epsilon 0.01) timed over a fixed number of agent steps
+after a short warm-up; agent steps per second count every agent's environment step with its
+decision and Sarsa update. The peer is a plain per-step NumPy loop of the same agent and the
+same physics (``scalar.step_one``), one agent, written below as one would write it by hand;
+ratios are ours / peer, measured in the same invocation.
+
+The last line times a whole population run (``--full``: 100 agents x 250 episodes, the paper's
+experiment; default: 100 agents x 5 episodes, said so in the output).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+import time
+
+import numpy as np
+import torch
+
+from skillchain_torch.envs.pinball import load_map
+from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
+from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+
+MAP = "pinball_simple_single"
+
+
+def time_trainer(population: int, agent_steps: int, threads: int, repeats: int = 3) -> float:
+    """Best of ``repeats`` rates (agent steps / s) over ``agent_steps`` after a warm-up."""
+    best = 0.0
+    for r in range(repeats):
+        cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=r)
+        trainer = PopulationTrainer(cfg, num_threads=threads)
+        trainer.train(max_agent_steps=20 * population)  # warm-up: caches, first allocations
+        start, done = time.perf_counter(), trainer.agent_steps
+        trainer.train(max_agent_steps=done + agent_steps)
+        best = max(best, (trainer.agent_steps - done) / (time.perf_counter() - start))
+    return best
+
+
+class NumpySarsa:
+    """The peer: one flat Sarsa agent in NumPy, stepping the physics one call at a time."""
+
+    def __init__(self, order=4, alpha=0.001, gamma=1.0, epsilon=0.01, seed=0):
+        self.c = np.array(list(itertools.product(range(order + 1), repeat=4)), dtype=float)
+        self.w = np.zeros((5, self.c.shape[0]))
+        self.alpha, self.gamma, self.epsilon = alpha, gamma, epsilon
+        self.rng = np.random.default_rng(seed)
+        pinball_map = load_map(MAP)
+        self.board = scalar_board(pinball_map)
+        self.start = tuple(pinball_map.starts[0].tolist()) + (0.0, 0.0)
+
+    def features(self, s):
+        x, y, vx, vy = s
+        return np.cos(math.pi * (self.c @ np.array([x, y, (vx + 1) / 2, (vy + 1) / 2])))
+
+    def act(self, q):
+        if self.rng.random() < self.epsilon:
+            return int(self.rng.integers(5))
+        best = np.flatnonzero(q == q.max())
+        return int(best[self.rng.integers(best.size)])
+
+    def run(self, steps: int) -> float:
+        s = self.start
+        phi = self.features(s)
+        a = self.act(self.w @ phi)
+        begin = time.perf_counter()
+        for _ in range(steps):
+            s, terminated, _ = step_one(s, a, self.board)
+            reward = 10000.0 if terminated else (-1.0 if a == 4 else -5.0)
+            if terminated:
+                delta = reward - self.w[a] @ phi
+                self.w[a] += self.alpha * delta * phi
+                s = self.start
+                phi = self.features(s)
+                a = self.act(self.w @ phi)
+                continue
+            phi1 = self.features(s)
+            q1 = self.w @ phi1
+            a1 = self.act(q1)
+            delta = reward + self.gamma * q1[a1] - self.w[a] @ phi
+            self.w[a] += self.alpha * delta * phi
+            phi, a = phi1, a1
+        return steps / (time.perf_counter() - begin)
+
+
+def time_population_run(runs: int, episodes: int, threads: int) -> tuple[float, int]:
+    cfg = TrainConfig(map=MAP, runs=runs, episodes=episodes, seed=0, checkpoint_every=0)
+    trainer = PopulationTrainer(cfg, num_threads=threads)
+    start = time.perf_counter()
+    trainer.train()
+    return time.perf_counter() - start, trainer.agent_steps
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--full", action="store_true", help="time the 100 x 250 run")
+    parser.add_argument("--steps", type=int, default=20_000, help="agent steps per row")
+    parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+
+    peer = max(NumpySarsa(seed=r).run(args.steps // 2) for r in range(2))
+    print(f"flat Sarsa on {MAP}, torch {torch.__version__}, {args.threads} thread(s); "
+          f"{args.steps:,} agent steps per row (best of 3)")
+    print(f"{'P':>5} | {'agent steps/s':>14} | {'numpy peer':>11} | {'ratio':>6}")
+    print(f"{'-' * 5}-|-{'-' * 14}-|-{'-' * 11}-|-{'-' * 6}")
+    for population in (1, 10, 100):
+        rate = time_trainer(population, args.steps, args.threads)
+        print(f"{population:>5} | {rate:>14,.0f} | {peer:>11,.0f} | {rate / peer:>6.2f}")
+    runs, episodes = (100, 250) if args.full else (100, 5)
+    wall, steps = time_population_run(runs, episodes, args.threads)
+    note = "" if args.full else " (short version; --full times the paper's 100 x 250)"
+    print(f"\n{runs} x {episodes} run: {wall:,.1f} s wall, {steps:,} agent steps, "
+          f"{steps / wall:,.0f} agent steps/s; the numpy peer would take "
+          f"{steps / peer:,.0f} s running the runs one after another{note}")
+
+
+if __name__ == "__main__":
+    main()

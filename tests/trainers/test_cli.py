@@ -1,0 +1,145 @@
+"""The ``skillchain`` command line: argument errors, outputs, the seed contract, resume."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from skillchain_torch.trainers.cli import main
+
+SMALL = ["--map", "pinball_box", "--episodes", "2", "--max-episode-steps", "300", "--quiet"]
+
+
+def _fails(argv, capsys, message):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err, err
+    return err
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--map", "nope"], "unknown map 'nope'; known maps: pinball_box"),
+        (["--runs", "0"], "runs must be >= 1, got 0"),
+        (["--episodes", "0"], "episodes must be >= 1, got 0"),
+        (["--epsilon", "1.5"], "epsilon must be in [0, 1], got 1.5"),
+        (["--epsilon", "-0.1"], "epsilon must be in [0, 1]"),
+        (["--alpha", "0"], "alpha must be > 0 and finite, got 0.0"),
+        (["--alpha", "-1"], "alpha must be > 0"),
+        (["--gamma", "1.01"], "gamma must be in [0, 1]"),
+        (["--order", "-1"], "order must be >= 0, got -1"),
+        (["--max-episode-steps", "0"], "max_episode_steps must be >= 1"),
+        (["--checkpoint-every", "-1"], "checkpoint_every must be >= 0"),
+        (["--agent", "skill-chaining"], "invalid choice: 'skill-chaining'"),
+        (["--runs", "two"], "invalid int value: 'two'"),
+        (["--threads", "0"], "--threads must be >= 1"),
+    ],
+)
+def test_argument_errors(tmp_path, capsys, argv, message):
+    err = _fails(["train", "--out", str(tmp_path / "run"), *argv], capsys, message)
+    assert "usage: skillchain train" in err
+    assert not (tmp_path / "run").exists()
+
+
+def test_missing_out_and_existing_directory(tmp_path, capsys):
+    _fails(["train", "--runs", "1"], capsys, "--out DIR is required")
+    (tmp_path / "notes.txt").write_text("keep me")
+    _fails(["train", "--out", str(tmp_path)], capsys, "exists and is not empty")
+
+
+def test_resume_errors(tmp_path, capsys):
+    _fails(["train", "--resume", str(tmp_path)], capsys, "no config.json there")
+    _fails(["train", "--resume", str(tmp_path), "--runs", "2"], capsys,
+           "--resume continues with the saved config; do not pass --runs")
+
+
+@pytest.fixture(scope="module")
+def three_runs(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "three"
+    assert main(["train", "--runs", "3", "--seed", "0", "--out", str(out),
+                 "--checkpoint-every", "1", *SMALL]) == 0
+    return out
+
+
+def test_outputs_shapes_and_dtypes(three_runs):
+    out = three_runs
+    returns, lengths = np.load(out / "returns.npy"), np.load(out / "lengths.npy")
+    assert returns.dtype == np.float64 and returns.shape == (3, 2)
+    assert lengths.dtype == np.int64 and lengths.shape == (3, 2)
+    assert (lengths >= 1).all() and (lengths <= 300).all()
+    config = json.loads((out / "config.json").read_text())
+    assert config["runs"] == 3 and config["order"] == 4 and config["alpha"] == 0.001
+    assert config["gamma"] == 1.0 and config["epsilon"] == 0.01
+    assert list((out / "tb").rglob("events.out.tfevents.*"))
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == [
+        "ckpt_000001.pt", "ckpt_000002.pt"]
+    png = (out / "learning_curve.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    info = json.loads((out / "run_info.json").read_text())
+    assert info["agent_steps"] == int(lengths.sum()) and info["wall_time_s"] > 0
+
+
+def test_row_p_equals_run_with_seed_plus_p(three_runs, tmp_path):
+    assert main(["train", "--runs", "1", "--seed", "2", "--out", str(tmp_path), *SMALL]) == 0
+    assert np.array_equal(np.load(tmp_path / "returns.npy")[0],
+                          np.load(three_runs / "returns.npy")[2])
+    assert np.array_equal(np.load(tmp_path / "lengths.npy")[0],
+                          np.load(three_runs / "lengths.npy")[2])
+
+
+def test_overwrite_and_resume_of_a_finished_run(three_runs, tmp_path, capsys):
+    out = tmp_path / "again"
+    argv = ["train", "--runs", "3", "--seed", "0", "--out", str(out), *SMALL]
+    assert main(argv) == 0
+    assert main([*argv, "--overwrite"]) == 0
+    assert np.array_equal(np.load(out / "returns.npy"), np.load(three_runs / "returns.npy"))
+    assert main(["train", "--resume", str(out), "--quiet"]) == 0
+    assert np.array_equal(np.load(out / "returns.npy"), np.load(three_runs / "returns.npy"))
+
+
+def test_resume_a_corrupt_checkpoint(three_runs, tmp_path, capsys):
+    out = tmp_path / "corrupt"
+    (out / "checkpoints").mkdir(parents=True)
+    (out / "config.json").write_text((three_runs / "config.json").read_text())
+    (out / "checkpoints" / "ckpt_000001.pt").write_bytes(b"garbage")
+    _fails(["train", "--resume", str(out)], capsys, "ckpt_000001.pt: not a readable checkpoint")
+
+
+def test_resume_continues_an_interrupted_run(three_runs, tmp_path):
+    """Copy the three-run directory's first checkpoint into a fresh run and resume it."""
+    out = tmp_path / "resumed"
+    (out / "checkpoints").mkdir(parents=True)
+    (out / "config.json").write_text((three_runs / "config.json").read_text())
+    first = three_runs / "checkpoints" / "ckpt_000001.pt"
+    (out / "checkpoints" / first.name).write_bytes(first.read_bytes())
+    assert main(["train", "--resume", str(out), "--quiet"]) == 0
+    assert np.array_equal(np.load(out / "returns.npy"), np.load(three_runs / "returns.npy"))
+    final = torch.load(out / "checkpoints" / "ckpt_000002.pt", weights_only=True)
+    reference = torch.load(three_runs / "checkpoints" / "ckpt_000002.pt", weights_only=True)
+    assert torch.equal(final["agent"]["q_head"]["weight"], reference["agent"]["q_head"]["weight"])
+
+
+def test_summarize(three_runs, capsys, tmp_path):
+    assert main(["summarize", str(three_runs)]) == 0
+    out = capsys.readouterr().out
+    assert "| 1-2 |" in out and "steps per run" in out
+    _fails(["summarize", str(tmp_path)], capsys, "not a finished run directory")
+
+
+def test_console_script_help():
+    script = Path(sys.executable).parent / "skillchain"
+    env = {**os.environ, "COLUMNS": "100"}
+    for argv in ([], ["train"]):
+        done = subprocess.run([str(script), *argv, "--help"], capture_output=True, text=True,
+                              env=env, timeout=60)
+        assert done.returncode == 0, done.stderr
+        assert "usage: skillchain" in done.stdout
+    assert "--scale-step-size" in done.stdout and "--resume DIR" in done.stdout

@@ -1,0 +1,50 @@
+"""Trainers: population training loops, their configs, hooks, checkpoints and the CLI.
+
+Names are imported lazily, so ``skillchain --help`` does not pay for importing torch.
+
+Example:
+    >>> from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+    >>> trainer = PopulationTrainer(TrainConfig(runs=3, episodes=2, max_episode_steps=50))
+    >>> trainer.train().returns.shape
+    (3, 2)
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "AGENTS": "agents",
+    "make_agent": "agents",
+    "ActiveEnvStepper": "stepper",
+    "EpisodeBatch": "population",
+    "PopulationTrainer": "population",
+    "STAGES": "population",
+    "FORMAT_VERSION": "checkpoint",
+    "latest_checkpoint": "checkpoint",
+    "load_checkpoint": "checkpoint",
+    "read_checkpoint": "checkpoint",
+    "save_checkpoint": "checkpoint",
+    "TrainConfig": "config",
+    "paper_defaults": "config",
+    "FlatSarsaAgent": "flat",
+    "TensorBoardHook": "logging",
+    "ProgressBar": "progress",
+    "plot_learning_curve": "plots",
+    "save_learning_curve": "plots",
+    "summarize": "summary",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

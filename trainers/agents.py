@@ -1,0 +1,42 @@
+"""The agent registry: ``--agent NAME`` -> a class built as ``cls(config, device=...)``.
+
+Adding an agent type (later issues: ``"given-options"``, ``"skill-chaining"``) is one entry
+here; the CLI's ``--agent`` choices and :class:`TrainConfig` validation read this dict. Entries
+are ``"module:Class"`` paths inside this package, imported on first use (so listing the
+choices does not import torch).
+
+An agent follows the episode protocol of :class:`~.flat.FlatSarsaAgent`: ``begin``,
+``observe``, ``observe_ends``, ``compact``, ``actions``, ``index``, ``flush``, ``state_dict`` and
+``load_state_dict``.
+
+Example:
+    >>> sorted(AGENTS)
+    ['flat', 'given-options']
+    >>> agent_class("flat").__name__
+    'FlatSarsaAgent'
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__all__ = ["AGENTS", "agent_class", "make_agent"]
+
+AGENTS: dict[str, str] = {
+    "flat": "flat:FlatSarsaAgent",
+    "given-options": "given_options:GivenOptionsAgent",
+}
+
+
+def agent_class(name: str) -> type:
+    """The class registered as ``name``; ``ValueError`` listing the known agents otherwise."""
+    try:
+        module, cls = AGENTS[name].split(":")
+    except KeyError:
+        raise ValueError(f"unknown agent {name!r}; known agents: {', '.join(AGENTS)}") from None
+    return getattr(importlib.import_module(f"{__package__}.{module}"), cls)
+
+
+def make_agent(config, device=None):
+    """Build the registered agent named ``config.agent``."""
+    return agent_class(config.agent)(config, device=device)

@@ -1,0 +1,203 @@
+"""The ``skillchain`` command line.
+
+    skillchain train --agent flat --map pinball_simple_single --runs 20 --episodes 100 \\
+        --seed 0 --out runs/flat
+    skillchain train --resume runs/flat          # continue from the last checkpoint
+    skillchain summarize runs/flat               # the table of returns per episode window
+
+``train`` writes ``DIR/config.json``, ``DIR/tb/`` (TensorBoard), ``DIR/checkpoints/``, and at
+the end ``DIR/returns.npy`` (float64 [runs, episodes]), ``DIR/lengths.npy`` (int64),
+``DIR/learning_curve.png`` and ``DIR/run_info.json`` (wall time, steps per second).
+Invalid arguments exit with status 2 and a message.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import shutil
+import sys
+from pathlib import Path
+
+from .agents import AGENTS
+from .config import TrainConfig
+
+__all__ = ["main", "build_parser"]
+
+OUTPUTS = ("returns.npy", "lengths.npy", "config.json", "run_info.json", "learning_curve.png",
+           "tb", "checkpoints")
+# Options that define the run; with --resume the saved config is used instead.
+CONFIG_OPTIONS = ("agent", "map", "runs", "episodes", "seed", "alpha", "epsilon", "gamma",
+                  "order", "scale_step_size", "max_episode_steps", "checkpoint_every")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="skillchain", description="Skill chaining (Konidaris & Barto, 2009) on Pinball."
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    train = sub.add_parser("train", help="train a population of agents",
+                           description="Train P independent agents for E episodes each.")
+    train.add_argument("--agent", choices=sorted(AGENTS), default=None,
+                       help="agent type (default: flat)")
+    train.add_argument("--map", default=None,
+                       help="Pinball map name (default: pinball_simple_single)")
+    train.add_argument("--runs", type=int, default=None, help="P, independent agents (default 1)")
+    train.add_argument("--episodes", type=int, default=None,
+                       help="E, episodes per agent (default 100)")
+    train.add_argument("--seed", type=int, default=None,
+                       help="agent p uses seed + p (default 0)")
+    train.add_argument("--alpha", type=float, default=None,
+                       help="step size (default: 0.001 on simple maps, 0.0005 on hard maps)")
+    train.add_argument("--epsilon", type=float, default=None, help="exploration (default 0.01)")
+    train.add_argument("--gamma", type=float, default=None, help="discount (default 1)")
+    train.add_argument("--order", type=int, default=None,
+                       help="Fourier order (default: 4 on simple maps, 5 on hard maps)")
+    train.add_argument("--scale-step-size", action="store_true", default=None,
+                       help="per-feature step sizes alpha / ||c|| (default off)")
+    train.add_argument("--max-episode-steps", type=int, default=None,
+                       help="truncate episodes after this many steps (default: never)")
+    train.add_argument("--checkpoint-every", type=int, default=None,
+                       help="checkpoint every N episodes of the slowest agent (default 25)")
+    train.add_argument("--device", default=None, help="torch device (default cpu)")
+    train.add_argument("--threads", type=int, default=1,
+                       help="torch intra-op threads while training (default 1)")
+    train.add_argument("--out", type=Path, default=None, help="output directory")
+    train.add_argument("--resume", type=Path, metavar="DIR", default=None,
+                       help="continue the run in DIR from its last checkpoint")
+    train.add_argument("--overwrite", action="store_true",
+                       help="replace the outputs of a previous run in --out")
+    train.add_argument("--quiet", action="store_true", help="no progress bar")
+    summary = sub.add_parser("summarize", help="print the returns table of a finished run")
+    summary.add_argument("dir", type=Path, help="run directory")
+    parser.commands = {"train": train, "summarize": summary}
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    command = parser.commands[args.command]  # errors print this command's usage
+    if args.command == "summarize":
+        from .summary import summarize_dir
+
+        try:
+            print(summarize_dir(args.dir))
+        except ValueError as err:
+            command.error(str(err))
+        return 0
+    return _train(command, args)
+
+
+def _config_from_args(parser, args) -> TrainConfig:
+    given = {name: getattr(args, name) for name in CONFIG_OPTIONS}
+    given = {k: v for k, v in given.items() if v is not None}
+    if args.device is not None:
+        given["device"] = args.device
+    try:
+        return TrainConfig(**given).validate().resolved()
+    except ValueError as err:
+        parser.error(str(err))
+
+
+def _prepare_out(parser, out: Path, overwrite: bool) -> None:
+    if out.exists() and not out.is_dir():
+        parser.error(f"--out {out} exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()):
+        if not overwrite:
+            parser.error(f"--out {out} exists and is not empty; pass --resume {out} to continue "
+                         "it or --overwrite to replace it")
+        for name in OUTPUTS:
+            target = out / name
+            if target.is_dir():
+                shutil.rmtree(target)
+            elif target.exists():
+                target.unlink()
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def _train(parser, args) -> int:
+    from .checkpoint import latest_checkpoint, load_checkpoint
+    from .population import PopulationTrainer
+
+    if args.threads < 1:
+        parser.error(f"--threads must be >= 1, got {args.threads}")
+    if args.resume is not None:
+        given = [f"--{n.replace('_', '-')}" for n in CONFIG_OPTIONS
+                 if getattr(args, n) is not None]
+        if given:
+            parser.error("--resume continues with the saved config; do not pass "
+                         + ", ".join(given))
+        out = args.resume
+        if not (out / "config.json").is_file():
+            parser.error(f"--resume {out}: no config.json there (not a run directory)")
+        try:
+            config = TrainConfig.load_json(out / "config.json").validate()
+        except ValueError as err:
+            parser.error(str(err))
+        if args.device is not None:
+            config = TrainConfig.from_dict({**config.to_dict(), "device": args.device})
+        path = latest_checkpoint(out)
+        if path is None:
+            parser.error(f"--resume {out}: no checkpoint under {out / 'checkpoints'}")
+        trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads)
+        try:
+            load_checkpoint(path, trainer)
+        except ValueError as err:
+            parser.error(str(err))
+        if not args.quiet:
+            print(f"resuming {out} from {path.name}", file=sys.stderr)
+    else:
+        if args.out is None:
+            parser.error("--out DIR is required (or --resume DIR)")
+        config = _config_from_args(parser, args)
+        out = args.out
+        _prepare_out(parser, out, args.overwrite)
+        config.save_json(out / "config.json")
+        trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads)
+    return _run(trainer, out, quiet=args.quiet)
+
+
+def _run(trainer, out: Path, quiet: bool) -> int:
+    import torch
+
+    from .logging import TensorBoardHook
+    from .plots import save_learning_curve
+    from .progress import ProgressBar
+
+    tb = TensorBoardHook.for_run(trainer, out)
+    tb.register(trainer)
+    bar = ProgressBar(disable=quiet)
+    bar.register(trainer)
+    try:
+        trainer.train()
+    except KeyboardInterrupt:
+        bar.close()
+        tb.close()
+        print(f"\ninterrupted; continue with: skillchain train --resume {out}", file=sys.stderr)
+        return 130
+    tb.close()
+    trainer.write_results(out)
+    cfg = trainer.config
+    save_learning_curve(trainer.returns, out / "learning_curve.png",
+                        title=f"{cfg.agent} on {cfg.map} ({cfg.runs} runs)")
+    info = {
+        "wall_time_s": trainer.elapsed,
+        "agent_steps": trainer.agent_steps,
+        "agent_steps_per_second": trainer.steps_per_second(),
+        "torch": torch.__version__,
+        "threads": trainer.num_threads,
+        "machine": platform.processor() or platform.machine(),
+    }
+    (out / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")
+    if not quiet:
+        mean_last = float(trainer.returns[:, -1].mean())
+        print(f"done: {trainer.agent_steps:,} agent steps in {trainer.elapsed:.1f} s "
+              f"({trainer.steps_per_second():,.0f}/s); mean return of the last episode "
+              f"{mean_last:,.1f}; outputs in {out}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,146 @@
+"""``TrainConfig``: everything that defines a training run, validated in one place.
+
+The learning hyperparameters default to the paper's section 5.1: Sarsa with gamma = 1 and
+epsilon = 0.01 over a Fourier basis of order 4 with alpha = 0.001 on the first Pinball instance
+(simple maps) and of order 5 with alpha = 0.0005 on the second (maps whose name contains
+``"hard"``). ``None`` for ``order`` or ``alpha`` means "the paper's value for this map";
+:meth:`TrainConfig.resolved` fills them in.
+
+Example:
+    >>> cfg = TrainConfig(map="pinball_hard_single", runs=4, episodes=10).resolved()
+    >>> cfg.order, cfg.alpha, cfg.gamma, cfg.epsilon
+    (5, 0.0005, 1.0, 0.01)
+    >>> TrainConfig(runs=0).validate()
+    Traceback (most recent call last):
+    ...
+    ValueError: runs must be >= 1, got 0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+__all__ = ["TrainConfig", "paper_defaults", "RESUME_FIELDS"]
+
+# Fields that may differ between a checkpoint and the trainer that loads it: they change how
+# the run is written down or where it computes, not the numbers it produces.
+RESUME_FIELDS = ("checkpoint_every", "device")
+
+
+def paper_defaults(map_name: str) -> tuple[int, float]:
+    """``(order, alpha)`` of the paper for a map: (5, 0.0005) on hard maps, else (4, 0.001)."""
+    return (5, 0.0005) if "hard" in map_name else (4, 0.001)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """A population training run.
+
+    Args:
+        agent: registry name of the agent (``"flat"``; see ``skillchain_torch.trainers.AGENTS``).
+        map: a shipped Pinball map name (``MAP_NAMES``).
+        runs: P, the number of independent agents (each with its own environment).
+        episodes: E, the episodes each agent runs.
+        seed: agent ``p`` (and its environment) uses seed ``seed + p``.
+        alpha: Sarsa step size (``None``: paper value for the map).
+        epsilon: exploration probability of epsilon-greedy, in [0, 1].
+        gamma: discount, in [0, 1].
+        order: Fourier basis order over the 4-d observation (``None``: paper value).
+        scale_step_size: per-feature step sizes ``alpha / ||c_i||`` (Konidaris et al. 2011).
+        max_episode_steps: truncate episodes after this many steps (``None``: never). A
+            truncated episode bootstraps from its last state (it is not a termination).
+        checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
+            this many episodes (0: only at the end).
+        device: torch device of the run.
+    """
+
+    agent: str = "flat"
+    map: str = "pinball_simple_single"
+    runs: int = 1
+    episodes: int = 100
+    seed: int = 0
+    alpha: float | None = None
+    epsilon: float = 0.01
+    gamma: float = 1.0
+    order: int | None = None
+    scale_step_size: bool = False
+    max_episode_steps: int | None = None
+    checkpoint_every: int = 25
+    device: str = "cpu"
+
+    def resolved(self) -> TrainConfig:
+        """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``)."""
+        order, alpha = paper_defaults(self.map)
+        return dataclasses.replace(
+            self,
+            order=order if self.order is None else int(self.order),
+            alpha=alpha if self.alpha is None else float(self.alpha),
+        )
+
+    def validate(self) -> TrainConfig:
+        """Raise ``ValueError`` naming the first impossible field; returns ``self``."""
+        from skillchain_torch.envs.pinball import MAP_NAMES
+        from skillchain_torch.trainers.agents import AGENTS
+
+        if self.agent not in AGENTS:
+            raise ValueError(f"agent must be one of {', '.join(AGENTS)}, got {self.agent!r}")
+        if self.map not in MAP_NAMES:
+            raise ValueError(f"unknown map {self.map!r}; known maps: {', '.join(MAP_NAMES)}")
+        checks = [
+            ("runs", self.runs, self.runs >= 1, ">= 1"),
+            ("episodes", self.episodes, self.episodes >= 1, ">= 1"),
+            ("epsilon", self.epsilon, 0.0 <= self.epsilon <= 1.0, "in [0, 1]"),
+            ("gamma", self.gamma, 0.0 <= self.gamma <= 1.0, "in [0, 1]"),
+            ("checkpoint_every", self.checkpoint_every, self.checkpoint_every >= 0, ">= 0"),
+        ]
+        if self.alpha is not None:
+            ok = math.isfinite(self.alpha) and self.alpha > 0
+            checks.append(("alpha", self.alpha, ok, "> 0 and finite"))
+        if self.order is not None:
+            checks.append(("order", self.order, self.order >= 0, ">= 0"))
+        if self.max_episode_steps is not None:
+            checks.append(
+                ("max_episode_steps", self.max_episode_steps, self.max_episode_steps >= 1, ">= 1")
+            )
+        for name, value, ok, rule in checks:
+            if not ok:
+                raise ValueError(f"{name} must be {rule}, got {value}")
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        """Build from a dict (e.g. ``config.json``); unknown keys raise ``ValueError``."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(f"unknown config fields: {', '.join(unknown)}")
+        return cls(**data)
+
+    def save_json(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def load_json(cls, path: str | Path) -> TrainConfig:
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, json.JSONDecodeError) as err:
+            raise ValueError(f"{path}: cannot read the run config ({err})") from None
+        if not isinstance(data, dict):
+            raise ValueError(f"{path}: the run config must be a JSON object")
+        try:
+            return cls.from_dict(data)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{path}: {err}") from None
+
+    def mismatches(self, other: TrainConfig) -> list[str]:
+        """Fields (outside ``RESUME_FIELDS``) whose values differ between two resolved configs."""
+        a, b = self.resolved().to_dict(), other.resolved().to_dict()
+        return [k for k in a if k not in RESUME_FIELDS and a[k] != b[k]]

@@ -1,0 +1,54 @@
+"""``GivenOptionsAgent``: the ``"given-options"`` agent type, options loaded from a file.
+
+``skillchain train --agent given-options --options PATH ...`` starts every agent of the
+population with agent 0's options of the :class:`~skillchain_torch.options.OptionBank` file at
+``PATH`` (written by ``OptionBank.save``, e.g. by ``python -m
+skillchain_torch.agents.region_option PATH``). The options keep learning their Q-heads by
+intra-option Q-learning; their initiation sets are used as given (no discovery), and every live
+slot is made LEARNED (executable). The top level is SMDP Sarsa with the run's ``order``,
+``alpha``, ``gamma`` and ``epsilon`` (paper values by default).
+
+The file's path is read from ``config.options`` (the ``--options`` flag).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from skillchain_torch.agents import HierarchicalAgent
+from skillchain_torch.options import OptionBank, OptionStatus
+
+from .config import TrainConfig
+
+__all__ = ["GivenOptionsAgent", "load_given_options"]
+
+
+def load_given_options(path, population: int, seed: int = 0,
+                       device: torch.device | str | None = None) -> OptionBank:
+    """Agent 0's options from ``path`` replicated ``population`` times, reseeded ``seed + p``,
+    live slots set to LEARNED."""
+    seeds = torch.arange(population, dtype=torch.int64) + int(seed)
+    bank = OptionBank.from_agent(path, 0, population, seeds=seeds, device=device)
+    bank.set_status(bank.live(), OptionStatus.LEARNED)
+    return bank
+
+
+class GivenOptionsAgent(HierarchicalAgent):
+    """:class:`HierarchicalAgent` built from a :class:`TrainConfig` and an options file.
+
+    Args:
+        config: the run; ``config.options`` is the OptionBank file (required).
+        device: torch device (default ``config.device``).
+    """
+
+    def __init__(self, config: TrainConfig, device: torch.device | str | None = None):
+        cfg = config.resolved()
+        path = getattr(cfg, "options", None)
+        if not path:
+            raise ValueError("the given-options agent needs an options file (--options PATH)")
+        device = torch.device(cfg.device if device is None else device)
+        bank = load_given_options(path, cfg.runs, cfg.seed, device=device)
+        super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
+                         epsilon=cfg.epsilon, seed=cfg.seed,
+                         scale_step_size=cfg.scale_step_size, device=device)
+        self.config = cfg

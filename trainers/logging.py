@@ -1,0 +1,108 @@
+"""TensorBoard logging of a population run through TorchRL's ``TensorboardLogger``.
+
+Written once per completed episode, never per step, so logging stays off the hot path:
+
+* ``agent_{p}/return`` and ``agent_{p}/length`` at step = episode number (1-based);
+* ``population/return_mean``, ``population/return_ci_low``, ``population/return_ci_high`` (mean
+  +- 1.96 sd / sqrt(n) over the agents, sample sd) and ``population/length_mean``, written when
+  the slowest agent completes that episode (every agent has then completed it);
+* ``perf/agent_steps_per_second`` and ``perf/active_agents`` at the same moments;
+* the hyperparameters (``log_hparams``) and a text summary of the config at the start.
+
+Example:
+    >>> import tempfile
+    >>> from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+    >>> trainer = PopulationTrainer(TrainConfig(runs=2, episodes=1, max_episode_steps=3))
+    >>> TensorBoardHook.for_run(trainer, tempfile.mkdtemp()).register(trainer)
+    >>> _ = trainer.train()
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from torchrl.record.loggers import TensorboardLogger
+
+__all__ = ["TensorBoardHook", "population_interval", "experiment_name"]
+
+
+def population_interval(values) -> tuple[float, float, float]:
+    """``(mean, low, high)``: mean +- 1.96 * sd / sqrt(n) (sample sd; 0 width when n == 1).
+
+    Example:
+        >>> population_interval([1.0, 2.0, 3.0])
+        (2.0, 0.868..., 3.131...)
+    """
+    x = np.asarray(values, dtype=np.float64)
+    mean = float(x.mean())
+    half = 1.96 * float(x.std(ddof=1)) / math.sqrt(x.size) if x.size > 1 else 0.0
+    return mean, mean - half, mean + half
+
+
+def experiment_name(config) -> str:
+    return f"{config.agent}_{config.map}_P{config.runs}_seed{config.seed}"
+
+
+class TensorBoardHook:
+    """Trainer hook writing per-episode scalars to a TorchRL ``TensorboardLogger``.
+
+    Args:
+        logger: the logger (``exp_name``, ``log_dir``); see :meth:`for_run`.
+        per_agent: also write every agent's return and length (P scalars per episode).
+    """
+
+    def __init__(self, logger: TensorboardLogger, per_agent: bool = True):
+        self.logger = logger
+        self.per_agent = per_agent
+        self._last = None  # (elapsed, agent_steps) at the previous population point
+
+    @classmethod
+    def for_run(cls, trainer, out_dir: str | Path, **kwargs) -> TensorBoardHook:
+        """A hook logging to ``out_dir/tb/<experiment name>``."""
+        log_dir = str(Path(out_dir) / "tb")
+        logger = TensorboardLogger(experiment_name(trainer.config), log_dir=log_dir)
+        return cls(logger, **kwargs)
+
+    def register(self, trainer, name: str = "tensorboard") -> None:
+        trainer.register_op("pre_train", self.pre_train, name=name)
+        trainer.register_op("post_episodes", self.post_episodes, name=name)
+        trainer.register_op("post_train", self.post_train, name=name)
+
+    def pre_train(self, trainer) -> None:
+        self._last = (trainer.wall_time, trainer.agent_steps)
+        if trainer.global_step > 0:
+            return  # resumed: the hyperparameters are already logged
+        config = trainer.config.to_dict()
+        self.logger.log_hparams({k: v if v is not None else "None" for k, v in config.items()})
+        rows = "\n".join(f"| {k} | {v} |" for k, v in config.items())
+        self.logger.experiment.add_text("config", "| field | value |\n|---|---|\n" + rows, 0)
+
+    def post_episodes(self, trainer, batch) -> None:
+        log = self.logger.log_scalar
+        if self.per_agent:
+            for p, e, r, n in zip(batch.agents, batch.episodes, batch.returns, batch.lengths):
+                log(f"agent_{p}/return", r, step=e + 1)
+                log(f"agent_{p}/length", n, step=e + 1)
+        episode = batch.population_episode
+        if episode is None:
+            return
+        mean, low, high = population_interval(trainer.returns[:, episode - 1])
+        log("population/return_mean", mean, step=episode)
+        log("population/return_ci_low", low, step=episode)
+        log("population/return_ci_high", high, step=episode)
+        log("population/length_mean", float(trainer.lengths[:, episode - 1].mean()), step=episode)
+        elapsed = trainer.wall_time
+        last_elapsed, last_steps = self._last or (0.0, 0)
+        if elapsed > last_elapsed:
+            rate = (trainer.agent_steps - last_steps) / (elapsed - last_elapsed)
+            log("perf/agent_steps_per_second", rate, step=episode)
+        log("perf/active_agents", trainer.num_active, step=episode)
+        self._last = (elapsed, trainer.agent_steps)
+
+    def post_train(self, trainer) -> None:
+        self.logger.experiment.flush()
+
+    def close(self) -> None:
+        self.logger.experiment.close()

@@ -1,0 +1,69 @@
+"""The learning-curve figure: mean return per episode with a 95% interval over runs.
+
+Example:
+    >>> import numpy as np, matplotlib
+    >>> matplotlib.use("Agg")
+    >>> ax = plot_learning_curve(np.random.default_rng(0).normal(size=(5, 20)), label="flat")
+    >>> len(ax.lines), len(ax.collections)
+    (1, 1)
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["learning_curve", "plot_learning_curve", "save_learning_curve"]
+
+
+def learning_curve(returns) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-episode ``(mean, low, high)`` over runs of ``returns [runs, episodes]``: mean +-
+    1.96 sd / sqrt(n) with n the runs that completed the episode (NaN = not completed)."""
+    r = np.asarray(returns, dtype=np.float64)
+    if r.ndim != 2:
+        raise ValueError(f"returns must be [runs, episodes], got shape {r.shape}")
+    n = np.sum(~np.isnan(r), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # sd of a single run
+        mean = np.nanmean(r, axis=0) if r.size else np.zeros(r.shape[1])
+        sd = np.nanstd(r, axis=0, ddof=1) if r.shape[0] > 1 else np.zeros(r.shape[1])
+        half = np.where(n > 1, 1.96 * sd / np.sqrt(np.maximum(n, 1)), 0.0)
+    return mean, mean - half, mean + half
+
+
+def plot_learning_curve(returns, ax=None, label: str | None = None, color: str | None = None,
+                        title: str | None = None):
+    """Draw the mean return per episode and its 95% band; returns the matplotlib ``Axes``."""
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        _, ax = plt.subplots(figsize=(7, 4.5))
+    mean, low, high = learning_curve(returns)
+    episodes = np.arange(1, mean.size + 1)
+    runs = np.asarray(returns).shape[0]
+    (line,) = ax.plot(episodes, mean, label=label or f"mean of {runs} runs", color=color, lw=1.5)
+    ax.fill_between(episodes, low, high, color=line.get_color(), alpha=0.25, lw=0,
+                    label="95% interval")
+    ax.set_xlabel("episode")
+    ax.set_ylabel("return")
+    if title:
+        ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    return ax
+
+
+def save_learning_curve(returns, path: str | Path, title: str | None = None) -> Path:
+    """Write the learning-curve figure to ``path`` (PNG through matplotlib's Agg backend)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 4.5))
+    FigureCanvasAgg(fig)
+    plot_learning_curve(returns, ax=fig.add_subplot(), title=title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    return path

@@ -1,0 +1,236 @@
+"""``ActiveEnvStepper``: step only the environments whose agents are still training.
+
+:meth:`PinballEnv.step_raw` steps every environment of the batch. Once most agents of a
+population have finished their episodes that wastes most of a step, so the trainer steps the
+*active* environments only, in compact rows (row ``i`` is environment ``index[i]``), through the
+same pure physics the env uses (:func:`~skillchain_torch.envs.pinball.pinball_step`, or
+:func:`~skillchain_torch.envs.pinball.scalar.step_one` one ball at a time in Python floats for
+small active sets on the CPU, where torch's per-operation overhead would dominate). Both paths
+are bit-identical to ``step_raw`` ball by ball, so an environment's trajectory does not depend on
+which others are active (``tests/trainers/test_stepper.py`` checks it against ``step_raw``).
+
+Starts are drawn by ``env.reset_raw`` (the env's own per-environment stream). The compact state
+is the truth while training; :meth:`sync` writes it back into the env (its state and step
+counters) before checkpoints and at the end.
+
+Why the env's private simulator holder (``env._sim``: ``state``, ``step_count``, ``done``, ``rng``)
+is touched here and only here: the env has no masked ``step_raw`` and no ``state_dict`` for its
+raw state yet.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from skillchain_torch.envs.pinball import observation, pinball_step
+from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
+
+__all__ = ["ActiveEnvStepper", "SCALAR_MAX"]
+
+# Up to this many active balls (CPU, float64) the Python-float physics beats the batched
+# kernel's fixed cost per step (benchmarks/train_throughput.py; ~20 us per ball).
+SCALAR_MAX = 128
+_GOAL, _NONE, _THRUST = 10000.0, -1.0, -5.0
+
+
+class ActiveEnvStepper:
+    """Compact stepping of a subset of a :class:`PinballEnv`'s environments.
+
+    Args:
+        env: a ``PinballEnv`` with ``batch_size=[P]``.
+        scalar_max: use the Python-float physics while at most this many rows are active
+            (CPU and float64 only).
+
+    Example:
+        >>> from skillchain_torch.envs.pinball.env import PinballEnv
+        >>> stepper = ActiveEnvStepper(PinballEnv(batch_size=[3], seed=0))
+        >>> stepper.start().shape
+        torch.Size([3, 4])
+        >>> obs, reward, ends = stepper.step(torch.tensor([0, 4, 1]))
+        >>> reward.tolist(), ends
+        ([-5.0, -1.0, -5.0], None)
+    """
+
+    def __init__(self, env, scalar_max: int = SCALAR_MAX):
+        self.env = env
+        self.population = int(env.num_envs)
+        self.max_episode_steps = env.max_episode_steps
+        self.pinball_map = env.pinball_map
+        self._sim = env._sim
+        self._device = self._sim.state.device
+        self._scalar_ok = self._device.type == "cpu" and env.dtype == torch.float64
+        self.scalar_max = int(scalar_max)
+        self.index = torch.arange(self.population, device=self._device)
+        self._state = self._sim.state.clone()  # [n, 4] (batched mode)
+        self._rows: list | None = None  # list of 4-tuples (scalar mode)
+        self._count = self._sim.step_count.clone()  # steps in the current episode, [n]
+        self._board = scalar_board(self.pinball_map) if self._scalar_ok else None
+        self._choose_mode()
+
+    # ------------------------------------------------------------------ modes
+    @property
+    def num_active(self) -> int:
+        return int(self.index.numel())
+
+    @property
+    def scalar(self) -> bool:
+        return self._rows is not None
+
+    def _choose_mode(self) -> None:
+        want_scalar = self._scalar_ok and self.num_active <= self.scalar_max
+        if want_scalar and self._rows is None:
+            self._rows = [tuple(r) for r in self._state.tolist()]
+            self._count_list = self._count.tolist()
+        elif not want_scalar and self._rows is not None:
+            self._state = self._tensor_state()
+            self._count = torch.tensor(self._count_list, dtype=torch.long, device=self._device)
+            self._rows = None
+
+    def _tensor_state(self) -> Tensor:
+        if self._rows is None:
+            return self._state
+        state = torch.tensor(self._rows, dtype=self.env.dtype, device=self._device)
+        return state.reshape(-1, 4)
+
+    def _tensor_count(self) -> Tensor:
+        if self._rows is None:
+            return self._count
+        return torch.tensor(self._count_list, dtype=torch.long, device=self._device)
+
+    # ------------------------------------------------------------------ episodes
+    def start(self) -> Tensor:
+        """Reset every environment and make all of them active; observations ``[P, 4]``."""
+        obs = self.env.reset_raw()
+        self.index = torch.arange(self.population, device=self._device)
+        self._state = self._sim.state.clone()
+        self._count = torch.zeros(self.population, dtype=torch.long, device=self._device)
+        self._rows = None
+        self._choose_mode()
+        return obs.reshape(self.population, 4)
+
+    def step(self, action: Tensor):
+        """Step the active rows: ``(observation [n, 4], reward [n], ends)``.
+
+        ``ends`` is ``None`` when no episode ended, else ``(terminated, truncated)``, bool
+        tensors ``[n]`` (truncated only where ``max_episode_steps`` is reached without the goal).
+        """
+        if self._rows is not None:
+            return self._step_scalar(action)
+        state, reward, terminated = pinball_step(self._state, action, self.pinball_map)
+        self._state = state
+        self._count += 1
+        ended = terminated
+        truncated = None
+        if self.max_episode_steps is not None:
+            truncated = (self._count >= self.max_episode_steps) & ~terminated
+            ended = terminated | truncated
+        if not bool(ended.any()):
+            return observation(state), reward, None
+        if truncated is None:
+            truncated = torch.zeros_like(terminated)
+        return observation(state), reward, (terminated, truncated)
+
+    def _step_scalar(self, action: Tensor):
+        board, rows, out = self._board, self._rows, []
+        any_term = False
+        terms = []
+        for i, a in enumerate(action.tolist()):
+            (x, y, vx, vy), term, _ = step_one(rows[i], a, board)
+            rows[i] = (x, y, vx, vy)
+            reward = _GOAL if term else (_NONE if a == 4 else _THRUST)
+            out.append((x, y, (vx + 1.0) / 2.0, (vy + 1.0) / 2.0, reward))
+            terms.append(term)
+            any_term |= term
+        counts = self._count_list
+        for i in range(len(counts)):
+            counts[i] += 1
+        limit = self.max_episode_steps
+        truncs = None
+        if limit is not None:
+            truncs = [c >= limit and not t for c, t in zip(counts, terms)]
+        buf = torch.tensor(out, dtype=self.env.dtype).reshape(-1, 5)
+        obs, reward = buf[:, :4], buf[:, 4]
+        if not (any_term or (truncs is not None and any(truncs))):
+            return obs, reward, None
+        terminated = torch.tensor(terms, dtype=torch.bool)
+        truncated = torch.tensor(truncs or [False] * len(terms), dtype=torch.bool)
+        return obs, reward, (terminated, truncated)
+
+    def reset(self, rows: Tensor) -> Tensor:
+        """Restart the environments in compact ``rows``; their observations ``[len(rows), 4]``."""
+        envs = self.index[rows]
+        mask = torch.zeros(self.population, dtype=torch.bool, device=self._device)
+        mask[envs] = True
+        obs = self.env.reset_raw(mask).reshape(self.population, 4)[envs]
+        fresh = self._sim.state[envs]
+        if self._rows is not None:
+            for i, s in zip(rows.tolist(), fresh.tolist()):
+                self._rows[i] = tuple(s)
+                self._count_list[i] = 0
+        else:
+            self._state[rows] = fresh
+            self._count[rows] = 0
+        return obs
+
+    def compact(self, keep: Tensor) -> None:
+        """Keep only the rows where ``keep`` (bool ``[n]``) is True; the others are written back.
+
+        Dropped rows belong to agents whose last episode just ended: their env is left done.
+        """
+        self.sync()
+        sim = self._sim
+        done = sim.done.clone()
+        done[self.index[~keep]] = True
+        sim.done = done
+        keep_rows = keep.nonzero().flatten()
+        self.index = self.index[keep_rows]
+        if self._rows is not None:
+            kept = keep_rows.tolist()
+            self._rows = [self._rows[i] for i in kept]
+            self._count_list = [self._count_list[i] for i in kept]
+        else:
+            self._state = self._state[keep_rows]
+            self._count = self._count[keep_rows]
+        self._choose_mode()
+
+    # ------------------------------------------------------------------ state
+    def sync(self) -> None:
+        """Write the active rows' states and step counters back into the env."""
+        sim = self._sim
+        state = sim.state.clone()
+        state[self.index] = self._tensor_state()
+        sim.state = state
+        count = sim.step_count.clone()
+        count[self.index] = self._tensor_count()
+        sim.step_count = count
+        done = sim.done.clone()
+        done[self.index] = False  # episode ends are handled (restarted) within the same step
+        sim.done = done
+
+    def state_dict(self) -> dict:
+        """The env's raw state (all P), step counters, done flags, start stream; active rows."""
+        self.sync()
+        sim = self._sim
+        return {
+            "state": sim.state.clone(),
+            "step_count": sim.step_count.clone(),
+            "done": sim.done.clone(),
+            "rng": sim.rng.state_dict(),
+            "seed": self.env.seed,
+            "index": self.index.clone(),
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        sim, dev = self._sim, self._device
+        sim.state = state["state"].to(device=dev, dtype=self.env.dtype).clone()
+        sim.step_count = state["step_count"].to(dev).clone()
+        sim.done = state["done"].to(dev).clone()
+        sim.rng.load_state_dict(state["rng"])
+        sim.rng.to(dev)
+        self.env.seed = int(state["seed"])
+        self.index = state["index"].to(dev).clone()
+        self._state = sim.state[self.index].clone()
+        self._count = sim.step_count[self.index].clone()
+        self._rows = None
+        self._choose_mode()
