@@ -25,11 +25,31 @@ from .config import TrainConfig
 
 __all__ = ["main", "build_parser"]
 
-OUTPUTS = ("returns.npy", "lengths.npy", "config.json", "run_info.json", "learning_curve.png",
-           "tb", "checkpoints")
+OUTPUTS = (
+    "returns.npy",
+    "lengths.npy",
+    "config.json",
+    "run_info.json",
+    "learning_curve.png",
+    "tb",
+    "checkpoints",
+)
 # Options that define the run; with --resume the saved config is used instead.
-CONFIG_OPTIONS = ("agent", "map", "runs", "episodes", "seed", "alpha", "epsilon", "gamma",
-                  "order", "scale_step_size", "max_episode_steps", "checkpoint_every")
+CONFIG_OPTIONS = (
+    "agent",
+    "map",
+    "runs",
+    "episodes",
+    "seed",
+    "alpha",
+    "epsilon",
+    "gamma",
+    "order",
+    "scale_step_size",
+    "max_episode_steps",
+    "checkpoint_every",
+    "options",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -37,37 +57,75 @@ def build_parser() -> argparse.ArgumentParser:
         prog="skillchain", description="Skill chaining (Konidaris & Barto, 2009) on Pinball."
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    train = sub.add_parser("train", help="train a population of agents",
-                           description="Train P independent agents for E episodes each.")
-    train.add_argument("--agent", choices=sorted(AGENTS), default=None,
-                       help="agent type (default: flat)")
-    train.add_argument("--map", default=None,
-                       help="Pinball map name (default: pinball_simple_single)")
+    train = sub.add_parser(
+        "train",
+        help="train a population of agents",
+        description="Train P independent agents for E episodes each.",
+    )
+    train.add_argument(
+        "--agent", choices=sorted(AGENTS), default=None, help="agent type (default: flat)"
+    )
+    train.add_argument(
+        "--map", default=None, help="Pinball map name (default: pinball_simple_single)"
+    )
     train.add_argument("--runs", type=int, default=None, help="P, independent agents (default 1)")
-    train.add_argument("--episodes", type=int, default=None,
-                       help="E, episodes per agent (default 100)")
-    train.add_argument("--seed", type=int, default=None,
-                       help="agent p uses seed + p (default 0)")
-    train.add_argument("--alpha", type=float, default=None,
-                       help="step size (default: 0.001 on simple maps, 0.0005 on hard maps)")
+    train.add_argument(
+        "--episodes", type=int, default=None, help="E, episodes per agent (default 100)"
+    )
+    train.add_argument("--seed", type=int, default=None, help="agent p uses seed + p (default 0)")
+    train.add_argument(
+        "--alpha",
+        type=float,
+        default=None,
+        help="step size (default: 0.001 on simple maps, 0.0005 on hard maps)",
+    )
     train.add_argument("--epsilon", type=float, default=None, help="exploration (default 0.01)")
     train.add_argument("--gamma", type=float, default=None, help="discount (default 1)")
-    train.add_argument("--order", type=int, default=None,
-                       help="Fourier order (default: 4 on simple maps, 5 on hard maps)")
-    train.add_argument("--scale-step-size", action="store_true", default=None,
-                       help="per-feature step sizes alpha / ||c|| (default off)")
-    train.add_argument("--max-episode-steps", type=int, default=None,
-                       help="truncate episodes after this many steps (default: never)")
-    train.add_argument("--checkpoint-every", type=int, default=None,
-                       help="checkpoint every N episodes of the slowest agent (default 25)")
+    train.add_argument(
+        "--order",
+        type=int,
+        default=None,
+        help="Fourier order (default: 4 on simple maps, 5 on hard maps)",
+    )
+    train.add_argument(
+        "--scale-step-size",
+        action="store_true",
+        default=None,
+        help="per-feature step sizes alpha / ||c|| (default off)",
+    )
+    train.add_argument(
+        "--max-episode-steps",
+        type=int,
+        default=None,
+        help="truncate episodes after this many steps (default: never)",
+    )
+    train.add_argument(
+        "--options",
+        default=None,
+        help="OptionBank file (torch.save) for --agent given-options, e.g. from "
+        "python -m skillchain_torch.agents.region_option OUT.pt",
+    )
+    train.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=None,
+        help="checkpoint every N episodes of the slowest agent (default 25)",
+    )
     train.add_argument("--device", default=None, help="torch device (default cpu)")
-    train.add_argument("--threads", type=int, default=1,
-                       help="torch intra-op threads while training (default 1)")
+    train.add_argument(
+        "--threads", type=int, default=1, help="torch intra-op threads while training (default 1)"
+    )
     train.add_argument("--out", type=Path, default=None, help="output directory")
-    train.add_argument("--resume", type=Path, metavar="DIR", default=None,
-                       help="continue the run in DIR from its last checkpoint")
-    train.add_argument("--overwrite", action="store_true",
-                       help="replace the outputs of a previous run in --out")
+    train.add_argument(
+        "--resume",
+        type=Path,
+        metavar="DIR",
+        default=None,
+        help="continue the run in DIR from its last checkpoint",
+    )
+    train.add_argument(
+        "--overwrite", action="store_true", help="replace the outputs of a previous run in --out"
+    )
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     summary = sub.add_parser("summarize", help="print the returns table of a finished run")
     summary.add_argument("dir", type=Path, help="run directory")
@@ -106,8 +164,10 @@ def _prepare_out(parser, out: Path, overwrite: bool) -> None:
         parser.error(f"--out {out} exists and is not a directory")
     if out.is_dir() and any(out.iterdir()):
         if not overwrite:
-            parser.error(f"--out {out} exists and is not empty; pass --resume {out} to continue "
-                         "it or --overwrite to replace it")
+            parser.error(
+                f"--out {out} exists and is not empty; pass --resume {out} to continue "
+                "it or --overwrite to replace it"
+            )
         for name in OUTPUTS:
             target = out / name
             if target.is_dir():
@@ -124,11 +184,11 @@ def _train(parser, args) -> int:
     if args.threads < 1:
         parser.error(f"--threads must be >= 1, got {args.threads}")
     if args.resume is not None:
-        given = [f"--{n.replace('_', '-')}" for n in CONFIG_OPTIONS
-                 if getattr(args, n) is not None]
+        given = [f"--{n.replace('_', '-')}" for n in CONFIG_OPTIONS if getattr(args, n) is not None]
         if given:
-            parser.error("--resume continues with the saved config; do not pass "
-                         + ", ".join(given))
+            parser.error(
+                "--resume continues with the saved config; do not pass " + ", ".join(given)
+            )
         out = args.resume
         if not (out / "config.json").is_file():
             parser.error(f"--resume {out}: no config.json there (not a run directory)")
@@ -180,8 +240,11 @@ def _run(trainer, out: Path, quiet: bool) -> int:
     tb.close()
     trainer.write_results(out)
     cfg = trainer.config
-    save_learning_curve(trainer.returns, out / "learning_curve.png",
-                        title=f"{cfg.agent} on {cfg.map} ({cfg.runs} runs)")
+    save_learning_curve(
+        trainer.returns,
+        out / "learning_curve.png",
+        title=f"{cfg.agent} on {cfg.map} ({cfg.runs} runs)",
+    )
     info = {
         "wall_time_s": trainer.elapsed,
         "agent_steps": trainer.agent_steps,
@@ -193,9 +256,12 @@ def _run(trainer, out: Path, quiet: bool) -> int:
     (out / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")
     if not quiet:
         mean_last = float(trainer.returns[:, -1].mean())
-        print(f"done: {trainer.agent_steps:,} agent steps in {trainer.elapsed:.1f} s "
-              f"({trainer.steps_per_second():,.0f}/s); mean return of the last episode "
-              f"{mean_last:,.1f}; outputs in {out}", file=sys.stderr)
+        print(
+            f"done: {trainer.agent_steps:,} agent steps in {trainer.elapsed:.1f} s "
+            f"({trainer.steps_per_second():,.0f}/s); mean return of the last episode "
+            f"{mean_last:,.1f}; outputs in {out}",
+            file=sys.stderr,
+        )
     return 0
 
 

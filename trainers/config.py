@@ -54,6 +54,7 @@ class TrainConfig:
         scale_step_size: per-feature step sizes ``alpha / ||c_i||`` (Konidaris et al. 2011).
         max_episode_steps: truncate episodes after this many steps (``None``: never). A
             truncated episode bootstraps from its last state (it is not a termination).
+        options: OptionBank file of given options (``--agent given-options``).
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -72,6 +73,7 @@ class TrainConfig:
     max_episode_steps: int | None = None
     checkpoint_every: int = 25
     device: str = "cpu"
+    options: str | None = None
 
     def resolved(self) -> TrainConfig:
         """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``)."""
@@ -107,6 +109,13 @@ class TrainConfig:
             checks.append(
                 ("max_episode_steps", self.max_episode_steps, self.max_episode_steps >= 1, ">= 1")
             )
+        if self.agent == "given-options":
+            if self.options is None:
+                raise ValueError(
+                    "agent 'given-options' needs options: an OptionBank file (--options)"
+                )
+            if not Path(self.options).is_file():
+                raise ValueError(f"options file {self.options!r} does not exist")
         for name, value, ok, rule in checks:
             if not ok:
                 raise ValueError(f"{name} must be {rule}, got {value}")

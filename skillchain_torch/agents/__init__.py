@@ -1,0 +1,23 @@
+"""Agents built from the library's pieces: the hierarchical (options) agent and helpers.
+
+- :class:`HierarchicalAgent`: SMDP Sarsa over primitives + options, intra-option Q-learning.
+- :func:`make_region_option`: a hand-built "reach the target region" option bank.
+"""
+
+from skillchain_torch.agents.hierarchical import (
+    MAX_OPTION_STEPS,
+    NUM_PRIMITIVES,
+    HierarchicalAgent,
+)
+
+__all__ = ["HierarchicalAgent", "MAX_OPTION_STEPS", "NUM_PRIMITIVES", "make_region_option"]
+
+
+def __getattr__(name: str):
+    # Imported on first use, so ``python -m skillchain_torch.agents.region_option`` does not
+    # find its module already imported by the package.
+    if name == "make_region_option":
+        from skillchain_torch.agents.region_option import make_region_option
+
+        return make_region_option
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,342 @@
+"""``HierarchicalAgent``: SMDP Sarsa over primitives and options, for a population of agents.
+
+The agent of paper sections 2, 4 and 5.1 with a given set of options (no discovery here):
+
+* **Top level.** Epsilon-greedy (``epsilon = 0.01``) over ``D = 5 + K`` decisions: the five
+  primitive actions and every option slot ``k`` (decision ``5 + k``) that is executable and
+  whose initiation set holds the state (:meth:`OptionBank.available`). Values are a
+  :class:`~skillchain_torch.modules.LinearQHead` over a Fourier basis (order 4 on the simple
+  maps, 5 on the hard ones), learned by SMDP Sarsa (:class:`~skillchain_torch.objectives.
+  SarsaUpdate`): a decision taken in ``s`` that lasted ``k`` steps and earned
+  ``R = sum_i gamma^i r_i`` is moved toward ``R + gamma^k Q(s', d')``, ``d'`` being the next
+  top-level decision drawn at ``s'`` (no bootstrap when the episode terminated at ``s'``).
+* **Options.** An executing option acts epsilon-greedily (``option_epsilon = 0.01``) by its own
+  Q-head until its termination predicate fires at the new state, it has run
+  ``max_option_steps = 250`` steps, or the episode ends. Every option's Q-head learns by
+  intra-option Q-learning (:class:`~skillchain_torch.objectives.IntraOptionQLearning`) from
+  *every* primitive transition whose start state lies in its initiation set, whoever acted.
+
+Random numbers: each active agent draws 4 uniforms from its own
+:class:`~skillchain_torch.rng.CounterRNG` stream per step (2 for the top-level choice, 2 for the
+option's action choice), and 4 more when it restarts an episode, whatever it decides, so its
+stream never depends on the other agents. Every tensor operation is row-independent (the
+library pieces are), so agent ``p`` of a population is bit-identical to the same agent alone.
+
+The state is held for all P agents; rows that finished training (``compact``) simply stop being
+updated. This is the simple, correct version: every step evaluates the option heads of all P
+agents (cost ``P * K * 5 * 256`` multiply-adds for the Fourier heads).
+
+Episode protocol (as :class:`skillchain_torch.trainers.flat.FlatSarsaAgent`; rows = active
+agents in ascending id order): ``begin(obs)``, ``observe(obs, reward)``,
+``observe_ends(obs, reward, terminated, truncated, restart_rows, start_obs)``,
+``compact(keep)``, ``actions``, ``index``, ``flush()``, ``state_dict()``,
+``load_state_dict()``. Also ``decisions`` and ``options`` (the top-level decision in force and
+the executing slot of each active row) for collectors.
+
+Example:
+    >>> from skillchain_torch.options import OptionBank
+    >>> bank = OptionBank.build(population=2, slots=3, order=1)
+    >>> agent = HierarchicalAgent(bank, order=1, seed=0)
+    >>> agent.q_head.weight.shape                 # [P, 5 + K, F]
+    torch.Size([2, 8, 16])
+    >>> obs = torch.tensor([[0.2, 0.9, 0.5, 0.5]] * 2, dtype=torch.float64)
+    >>> agent.begin(obs).shape
+    torch.Size([2])
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from torch import Tensor, nn
+
+from skillchain_torch.features import FourierBasis
+from skillchain_torch.modules import LinearQHead
+from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate, discount
+from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
+from skillchain_torch.policies import epsilon_greedy
+from skillchain_torch.rng import CounterRNG
+
+__all__ = ["HierarchicalAgent", "NUM_PRIMITIVES", "MAX_OPTION_STEPS", "UNIFORMS_PER_STEP"]
+
+NUM_PRIMITIVES = 5
+OBS_DIM = 4
+MAX_OPTION_STEPS = 250
+UNIFORMS_PER_STEP = 4  # top-level (explore, pick), option (explore, pick)
+AGENT_STREAM = 0
+
+
+class HierarchicalAgent(nn.Module):
+    """Population-batched SMDP Sarsa agent over primitive actions and the options of a bank.
+
+    Args:
+        bank: the agents' :class:`OptionBank` (P agents, K slots); its Q-heads keep learning.
+        order: Fourier order of the top-level basis (paper: 4 simple maps, 5 hard maps).
+        alpha: top-level step size (paper: 0.001 at order 4, 0.0005 at order 5).
+        gamma: discount of both levels (paper: 1).
+        epsilon: top-level exploration.
+        seed: agent p uses seed ``seed + p`` (int), or a ``LongTensor [P]`` of seeds.
+        events: the base target events indexed by ``bank.target_event`` (default: the goal).
+        option_epsilon: exploration of an executing option (paper: 0.01).
+        max_option_steps: an option is interrupted after this many steps (paper: 250).
+        completion_reward: ``C`` of :class:`IntraOptionQLearning`.
+        scale_step_size: per-feature top-level step sizes (Konidaris et al. 2011).
+        device: torch device (default: the bank's).
+    """
+
+    def __init__(
+        self,
+        bank: OptionBank,
+        order: int = 4,
+        alpha: float = 0.001,
+        gamma: float = 1.0,
+        epsilon: float = 0.01,
+        seed: int | Tensor = 0,
+        events: Sequence[TerminationPredicate] = (GoalEvent(),),
+        option_epsilon: float = 0.01,
+        max_option_steps: int = MAX_OPTION_STEPS,
+        completion_reward: float | Tensor = 10_000.0,
+        scale_step_size: bool = False,
+        device: torch.device | str | None = None,
+    ):
+        super().__init__()
+        device = torch.device(bank.status.device if device is None else device)
+        self.bank = bank.to(device)
+        self.population, self.slots = bank.population, bank.slots
+        self.num_decisions = NUM_PRIMITIVES + self.slots
+        self.epsilon, self.option_epsilon = float(epsilon), float(option_epsilon)
+        self.gamma = float(gamma)
+        self.max_option_steps = int(max_option_steps)
+        self.events = tuple(events)
+        self.features = FourierBasis(OBS_DIM, order).to(device)
+        self.q_head = LinearQHead(self.features.num_features, self.num_decisions,
+                                  self.population, device=device)
+        scale = self.features.step_size_scale() if scale_step_size else None
+        self.update = SarsaUpdate(alpha, gamma, step_size_scale=scale).to(device)
+        self.option_update = IntraOptionQLearning(gamma, completion_reward)
+        if isinstance(seed, Tensor):
+            self.rng = CounterRNG(seed.to(device), stream=AGENT_STREAM)
+        else:
+            self.rng = CounterRNG.from_seed(int(seed), self.population, stream=AGENT_STREAM,
+                                            device=device)
+        P = self.population
+        f64 = dict(dtype=torch.float64, device=device)
+        i64 = dict(dtype=torch.int64, device=device)
+        # Per-agent episode state (all P rows; only the active ones change). Plain attributes,
+        # not buffers: they are replaced every step and saved by ``state_dict`` explicitly.
+        self.obs = torch.zeros(P, OBS_DIM, **f64)  # current s
+        self.contains = torch.zeros(P, self.slots, dtype=torch.bool, device=device)  # s in I_k
+        self.decision_phi = torch.zeros(P, self.features.num_features, **f64)  # phi(s_decision)
+        self.decision = torch.zeros(P, **i64)  # in force (< 5 or 5 + k)
+        self.option = torch.full((P,), -1, **i64)  # executing slot or -1
+        self.action = torch.zeros(P, **i64)  # primitive taken at s
+        self.decision_return = torch.zeros(P, **f64)  # R so far
+        self.duration = torch.zeros(P, **i64)  # k so far
+        self.active = torch.ones(P, dtype=torch.bool, device=device)
+        self._index = torch.arange(P, device=device)
+
+    # ------------------------------------------------------------------ pieces
+    def top_level_available(self, obs: Tensor, contains: Tensor | None = None) -> Tensor:
+        """``[P, 5 + K]``: the primitives (always) and the available options at ``obs``."""
+        options = self.bank.available(obs, contains)
+        primitives = torch.ones(self.population, NUM_PRIMITIVES, dtype=torch.bool,
+                                device=options.device)
+        return torch.cat([primitives, options], dim=-1)
+
+    def _choose(self, obs: Tensor, contains: Tensor, uniforms: Tensor) -> tuple[Tensor, Tensor]:
+        """Top-level epsilon-greedy decision at ``obs`` for all rows; ``(phi, decision)``."""
+        phi = self.features(obs)
+        q = self.q_head(phi)
+        return phi, epsilon_greedy(q, self.top_level_available(obs, contains), self.epsilon,
+                                   uniforms)
+
+    def _act(self, rows: Tensor, uniforms: Tensor) -> None:
+        """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's
+        epsilon-greedy action by its Q-head at the current state."""
+        action = self.decision.clamp(max=NUM_PRIMITIVES - 1)
+        executing = rows & (self.option >= 0)
+        if bool(executing.any()):
+            q = self.bank.q_head(self.obs)  # [P, K, A]
+            slot = self.option.clamp(min=0)
+            q_opt = q.gather(1, slot[:, None, None].expand(-1, 1, q.shape[-1]))[:, 0]
+            all_actions = torch.ones_like(q_opt, dtype=torch.bool)
+            by_option = epsilon_greedy(q_opt, all_actions, self.option_epsilon, uniforms)
+            action = torch.where(executing, by_option, action)
+        self.action = torch.where(rows, action, self.action)
+
+    def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
+        """Rows ``rows [P]`` start an episode at ``obs [P, 4]`` (other rows of ``obs`` are
+        ignored): fresh decision and action, 4 uniforms drawn."""
+        u = self.rng.uniform(UNIFORMS_PER_STEP, mask=rows)
+        obs = torch.where(rows[:, None], obs, self.obs)
+        contains = self.bank.classifier.contains(obs)
+        phi, decision = self._choose(obs, contains, u[:, :2])
+        self.obs = obs
+        self.contains = torch.where(rows[:, None], contains, self.contains)
+        self._new_decisions(rows, phi, decision)
+        self._act(rows, u[:, 2:])
+
+    def _new_decisions(self, rows: Tensor, phi: Tensor, decision: Tensor) -> None:
+        self.decision = torch.where(rows, decision, self.decision)
+        option = torch.where(decision >= NUM_PRIMITIVES, decision - NUM_PRIMITIVES,
+                             torch.full_like(decision, -1))
+        self.option = torch.where(rows, option, self.option)
+        self.decision_phi = torch.where(rows[:, None], phi, self.decision_phi)
+        self.decision_return = torch.where(rows, torch.zeros_like(self.decision_return),
+                                           self.decision_return)
+        self.duration = torch.where(rows, torch.zeros_like(self.duration), self.duration)
+
+    def transition(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
+                   truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:
+        """Learn from ``(s, a, r, s')`` for the rows in ``stepped [P]`` and pick their next
+        actions (all arguments ``[P]`` / ``[P, 4]``; other rows are left untouched).
+
+        Returns a dict of ``[P]`` tensors for monitoring: ``decision`` and ``option`` in force
+        during this step, ``decision_ended`` (the SMDP update happened), the decision's
+        ``duration`` k and ``decision_return`` R so far, ``smdp_delta`` (0 where no update) and
+        ``option_delta [P, K]`` (intra-option TD errors, 0 outside the initiation sets).
+        """
+        bank = self.bank
+        terminated = terminated.to(torch.bool) & stepped
+        truncated = truncated.to(torch.bool) & stepped
+        ended = terminated | truncated
+        next_obs = torch.where(stepped[:, None], next_obs, self.obs)
+        reward = reward.to(torch.float64)
+        reward = torch.where(stepped, reward, torch.zeros_like(reward))
+        contains_next = bank.classifier.contains(next_obs)
+        reached = bank.target_reached(next_obs, terminated, self.events, contains=contains_next)
+        # Intra-option Q-learning: every live option whose initiation set holds s.
+        option_delta = self.option_update(
+            bank.q_head, self.obs, self.action, reward, next_obs, terminated, self.contains,
+            reached, learnable=bank.live() & stepped[:, None],
+        )
+        # The decision in force accumulates the (discounted) reward.
+        ret = self.decision_return + discount(self.gamma, self.duration) * reward
+        self.decision_return = torch.where(stepped, ret, self.decision_return)
+        self.duration = torch.where(stepped, self.duration + 1, self.duration)
+        executing = self.option >= 0
+        slot = self.option.clamp(min=0)
+        option_stops = executing & (reached.gather(1, slot[:, None])[:, 0]
+                                    | (self.duration >= self.max_option_steps))
+        decision_ended = stepped & (~executing | option_stops | ended)
+        # Next top-level decision at s' (also the bootstrap decision d').
+        u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
+        phi_next, d_next = self._choose(next_obs, contains_next, u[:, :2])
+        smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
+                                 self.decision_return, self.duration.clamp(min=1), phi_next,
+                                 d_next, terminated, active=decision_ended)
+        info = {"decision_ended": decision_ended, "duration": self.duration.clone(),
+                "decision_return": self.decision_return.clone(), "option_delta": option_delta,
+                "smdp_delta": smdp_delta, "decision": self.decision.clone(),
+                "option": self.option.clone()}
+        continuing = stepped & ~ended
+        self.obs = next_obs
+        self.contains = torch.where(stepped[:, None], contains_next, self.contains)
+        self._new_decisions(decision_ended & ~ended, phi_next, d_next)
+        self.option = torch.where(ended, torch.full_like(self.option, -1), self.option)
+        self._act(continuing, u[:, 2:])
+        return info
+
+    # ------------------------------------------------------------------ protocol
+    def _full(self, rows_value: Tensor, fill: Tensor) -> Tensor:
+        out = fill.clone()
+        out[self._index] = rows_value.to(out.dtype)
+        return out
+
+    def begin(self, obs: Tensor) -> Tensor:
+        """First decisions of every active agent at its start observation ``[n, 4]``."""
+        self._start_decisions(self._full(obs, self.obs), self.active.clone())
+        return self.actions
+
+    def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
+        """Learn from a step in which no episode ended; the next actions ``[n]``."""
+        none = torch.zeros_like(self.active)
+        self.transition(self._full(obs, self.obs), self._full(reward, self.decision_return),
+                        none, none, self.active)
+        return self.actions
+
+    def observe_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
+                     restart_rows: Tensor, start_obs: Tensor | None) -> Tensor:
+        """Like :meth:`observe` when some episodes ended (see ``FlatSarsaAgent``): terminal
+        updates do not bootstrap, truncated ones do; rows in ``restart_rows`` then decide at
+        ``start_obs``."""
+        none = torch.zeros_like(self.active)
+        self.transition(self._full(obs, self.obs), self._full(reward, self.decision_return),
+                        self._full(terminated, none), self._full(truncated, none), self.active)
+        if restart_rows.numel() > 0:
+            restart = torch.zeros_like(self.active)
+            restart[self._index[restart_rows]] = True
+            start = self.obs.clone()
+            start[self._index[restart_rows]] = start_obs.to(start.dtype)
+            self._start_decisions(start, restart)
+        return self.actions
+
+    def compact(self, keep: Tensor) -> None:
+        """Keep the active rows where ``keep [n]``; the others stop for good."""
+        self._index = self._index[keep]
+        active = torch.zeros_like(self.active)
+        active[self._index] = True
+        self.active = active
+
+    @property
+    def index(self) -> Tensor:
+        """Ids of the active agents, ascending ``[n]``."""
+        return self._index
+
+    @property
+    def actions(self) -> Tensor:
+        """The primitive action of each active row ``[n]``."""
+        return self.action[self._index]
+
+    @property
+    def decisions(self) -> Tensor:
+        """The top-level decision in force for each active row ``[n]`` (5 + k: option k)."""
+        return self.decision[self._index]
+
+    @property
+    def options(self) -> Tensor:
+        """The executing option slot of each active row ``[n]`` (-1: none)."""
+        return self.option[self._index]
+
+    def flush(self) -> None:
+        """Nothing to write back: the state is held for all agents."""
+
+    # ------------------------------------------------------------------ state
+    _EPISODE = ("obs", "contains", "decision", "option", "decision_return", "duration",
+                "active")
+
+    def state_dict(self, *args, **kwargs):
+        """Top-level weights, options, streams, and every agent's episode state.
+
+        Laid out like ``FlatSarsaAgent``'s (``q_head``, ``rng``, ``index``, ``action``,
+        ``phi``: the features of the state where the decision in force was taken), plus
+        ``bank`` and ``episode`` (the per-agent option state).
+        """
+        return {
+            "q_head": self.q_head.state_dict(),
+            "rng": self.rng.state_dict(),
+            "index": self._index.clone(),
+            "action": self.action.clone(),
+            "phi": self.decision_phi.clone(),
+            "bank": self.bank.state_dict(),
+            "episode": {name: getattr(self, name).clone() for name in self._EPISODE},
+        }
+
+    def load_state_dict(self, state, strict: bool = True, assign: bool = False):
+        device = self.obs.device
+        self.q_head.load_state_dict(state["q_head"])
+        self.bank.load_state_dict(state["bank"])
+        self.rng.load_state_dict(state["rng"])
+        self.rng.to(device)
+        self._index = state["index"].to(device)
+        self.action = state["action"].to(device).clone()
+        self.decision_phi = state["phi"].to(device).clone()
+        for name in self._EPISODE:
+            setattr(self, name, state["episode"][name].to(device).clone())
+
+    def extra_repr(self) -> str:
+        return (f"population={self.population}, slots={self.slots}, "
+                f"epsilon={self.epsilon}, option_epsilon={self.option_epsilon}, "
+                f"gamma={self.gamma}, max_option_steps={self.max_option_steps}, "
+                f"active={int(self._index.numel())}")

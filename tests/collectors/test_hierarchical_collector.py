@@ -1,0 +1,65 @@
+"""HierarchicalCollector: keys, shapes and option annotations of the transition batches."""
+
+from __future__ import annotations
+
+import torch
+
+from skillchain_torch.agents import HierarchicalAgent
+from skillchain_torch.collectors import HierarchicalCollector
+from skillchain_torch.envs.pinball import PinballEnv, observation
+from skillchain_torch.options import (
+    FourierOptionQHead,
+    InitiationClassifier,
+    OptionBank,
+    OptionStatus,
+    RegionEvent,
+)
+
+
+def make(population=2, seed=0, max_episode_steps=30):
+    bank = OptionBank(population, 1, FourierOptionQHead(population, 1, order=1),
+                      InitiationClassifier(population, 1, seed=seed))
+    bank.status[:] = int(OptionStatus.LEARNED)  # untrained classifier: available everywhere
+    bank.target_event[:] = 0
+    agent = HierarchicalAgent(bank, order=1, epsilon=0.3, seed=seed,
+                              events=(RegionEvent(center=(0.5, 0.5), radius=0.1),),
+                              max_option_steps=10)
+    env = PinballEnv("pinball_simple_single", batch_size=[population], seed=seed,
+                     max_episode_steps=max_episode_steps)
+    return env, agent
+
+
+def test_batches_keys_and_shapes():
+    env, agent = make()
+    collector = HierarchicalCollector(env, agent, frames_per_batch=41, total_frames=120)
+    batches = list(collector)
+    assert len(batches) == 3 and collector.frames_per_batch == 40
+    td = batches[0]
+    assert td.batch_size == (20, 2)
+    for key in ("observation", "state"):
+        assert td[key].shape == (20, 2, 4) and td["next", key].shape == (20, 2, 4)
+    for key in ("action", "decision", "option"):
+        assert td[key].dtype == torch.int64 and td[key].shape == (20, 2)
+    for key in ("reward", "done", "terminated", "truncated"):
+        assert td["next", key].shape == (20, 2, 1)
+    torch.testing.assert_close(td["observation"], observation(td["state"]), rtol=0, atol=0)
+
+
+def test_option_annotations_and_restarts():
+    env, agent = make(max_episode_steps=30)
+    td = HierarchicalCollector(env, agent, frames_per_batch=200).rollout()
+    option, decision, action = td["option"], td["decision"], td["action"]
+    executing = option >= 0
+    assert bool(executing.any()) and bool((~executing).any())
+    assert torch.equal(decision[executing], 5 + option[executing])
+    assert torch.equal(decision[~executing], action[~executing])  # a primitive decision
+    assert bool((action < 5).all())
+    done = td["next", "done"][..., 0]
+    assert done.sum().item() == 6  # 100 steps, episodes of 30: 3 truncations per env
+    # next state of a step is the next step's state, except where the episode restarted
+    same = torch.equal(td["next", "state"][:-1][~done[:-1]], td["state"][1:][~done[:-1]])
+    assert same
+    start = td["state"][1:][done[:-1]]
+    assert torch.equal(start[:, 2:], torch.zeros_like(start[:, 2:]))  # restarts at rest
+    # an option lasts at most max_option_steps = 10 consecutive steps in one decision
+    assert int(agent.duration.max()) <= 10
