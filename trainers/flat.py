@@ -38,7 +38,7 @@ from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy
 from skillchain_torch.rng import CounterRNG
 
 from .config import TrainConfig
-from .kernels import FourierKernel, candidate_codes, decide, decision_table
+from .kernels import candidate_codes, decide, decision_table
 
 __all__ = ["FlatSarsaAgent", "AGENT_STREAM", "BLOCK_DECISIONS"]
 
@@ -86,7 +86,6 @@ class FlatSarsaAgent(nn.Module):
         scale = self.features.step_size_scale() if cfg.scale_step_size else None
         self.update = SarsaUpdate(cfg.alpha, cfg.gamma, step_size_scale=scale).to(device)
         self.rng = CounterRNG.from_seed(cfg.seed, cfg.runs, stream=AGENT_STREAM, device=device)
-        self.kernel = FourierKernel(OBS_DIM, cfg.order, device=device)
         self._powers = (2 ** torch.arange(NUM_ACTIONS, device=device))[:, None]  # [D, 1]
         # The hot path's state lives in a plain object: setting attributes of an nn.Module
         # costs microseconds, several times per step.
@@ -102,8 +101,8 @@ class FlatSarsaAgent(nn.Module):
 
     # ------------------------------------------------------------------ pieces
     def featurize(self, obs: Tensor) -> Tensor:
-        """``FourierBasis(obs)`` bit for bit: ``[n, 4] -> [n, F]`` (see :class:`FourierKernel`)."""
-        return self.kernel(obs)
+        """``FourierBasis(obs)``: ``[n, 4] -> [n, F]``."""
+        return self.features(obs)
 
     def q_values(self, phi: Tensor, rows: Tensor | None = None) -> Tensor:
         """``LinearQHead.forward`` of the working rows (all, or ``rows``), action-major
@@ -179,7 +178,7 @@ class FlatSarsaAgent(nn.Module):
     def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
         """Learn from ``(s, a, r, s')`` for every active row (no episode ended); next actions."""
         w = self._work
-        phi1 = self.kernel(obs)
+        phi1 = self.features(obs)
         q1 = self.q_values(phi1)
         self._next_slot()
         a1 = self._decide_slot(q1)
@@ -209,7 +208,7 @@ class FlatSarsaAgent(nn.Module):
                 have finished training and are dropped by the next :meth:`compact`.
         """
         w = self._work
-        phi1 = self.kernel(obs)
+        phi1 = self.features(obs)
         q1 = self.q_values(phi1)
         self._next_slot()
         a1 = self._decide_slot(q1)
@@ -218,7 +217,7 @@ class FlatSarsaAgent(nn.Module):
             # A terminated row's next decision is its start decision: it takes this step's
             # uniforms (its decision at s' above is discarded). A truncated row already used
             # them at s', so its start decision draws two more.
-            phi_start = self.kernel(start_obs)
+            phi_start = self.features(start_obs)
             q_start = self.q_values(phi_start, restart_rows)
             a_start = self._decide_slot(q_start, restart_rows)
             extra = truncated[restart_rows]

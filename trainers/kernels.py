@@ -4,8 +4,6 @@ A single agent pays torch's per-operation overhead (a few microseconds) on every
 every step, so these functions compute exactly what the library pieces compute -- bit for bit,
 ``tests/trainers/test_flat.py`` checks it -- with as few operations as possible:
 
-* :class:`FourierKernel`: ``FourierBasis.forward`` (``cos(pi * c . x)``, the dot product
-  accumulated over the dims left to right) by broadcast additions of ``x_j * k``;
 * :func:`decide`: :func:`~skillchain_torch.policies.epsilon_greedy` with every action
   available, without its validation syncs;
 * :func:`decision_table` / :func:`candidate_codes`: epsilon-greedy split in two. The uniforms
@@ -20,43 +18,11 @@ not depend on which other agents are in the batch.
 from __future__ import annotations
 
 import functools
-import math
 
 import torch
 from torch import Tensor
 
-__all__ = ["FourierKernel", "decide", "decision_table", "candidate_codes"]
-
-
-class FourierKernel:
-    """``FourierBasis(dim, order)`` features, bit-identical, without a gather or a matmul.
-
-    With ``t_j[k] = x_j * k`` (k = 0..order), the dot products of all coefficient vectors are
-    built by broadcast additions, ``((t_0[c_0] + t_1[c_1]) + t_2[c_2]) + t_3[c_3]``: FourierBasis's
-    order of accumulation and of the coefficient vectors (last dim fastest).
-
-    Example:
-        >>> from skillchain_torch.features import FourierBasis
-        >>> kernel = FourierKernel(dim=4, order=3)
-        >>> x = torch.rand(5, 4, dtype=torch.float64)
-        >>> torch.equal(kernel(x), FourierBasis(4, 3)(x))
-        True
-    """
-
-    def __init__(self, dim: int, order: int, device=None):
-        self.dim, self.order = dim, order
-        self.k = torch.arange(order + 1, dtype=torch.float64, device=device)
-        self.pi = torch.tensor(math.pi, dtype=torch.float64, device=device)
-
-    def __call__(self, obs: Tensor) -> Tensor:
-        """``[n, dim] -> [n, (order + 1) ** dim]``."""
-        n = obs.shape[0]
-        # t_j[k] = x_j * k as dim views [n, 1, order + 1]
-        table = (obs[:, :, None] * self.k).unsqueeze(2).unbind(1)
-        dot = table[0]
-        for t in table[1:]:
-            dot = dot.view(n, -1, 1) + t  # [n, K^j, 1] + [n, 1, K]: last dim fastest
-        return dot.view(n, -1).mul_(self.pi).cos_()
+__all__ = ["decide", "decision_table", "candidate_codes"]
 
 
 def decide(q: Tensor, explore: Tensor, u1: Tensor) -> Tensor:

@@ -7,7 +7,9 @@ Written once per completed episode, never per step, so logging stays off the hot
   +- 1.96 sd / sqrt(n) over the agents, sample sd) and ``population/length_mean``, written when
   the slowest agent completes that episode (every agent has then completed it);
 * ``perf/agent_steps_per_second`` and ``perf/active_agents`` at the same moments;
-* the hyperparameters (``log_hparams``) and a text summary of the config at the start.
+* the hyperparameters (``log_hparams``) and a text summary of the config at the start;
+* for agents with an option bank, the option statistics and initiation-set images of
+  :class:`~.option_monitor.OptionMonitor` (registered by :meth:`TensorBoardHook.register`).
 
 Example:
     >>> import tempfile
@@ -51,11 +53,15 @@ class TensorBoardHook:
     Args:
         logger: the logger (``exp_name``, ``log_dir``); see :meth:`for_run`.
         per_agent: also write every agent's return and length (P scalars per episode).
+        options: when the trainer's agent has an option bank, :meth:`register` also registers
+            an :class:`~.option_monitor.OptionMonitor` on this logger (``option_monitor``).
     """
 
-    def __init__(self, logger: TensorboardLogger, per_agent: bool = True):
+    def __init__(self, logger: TensorboardLogger, per_agent: bool = True, options: bool = True):
         self.logger = logger
         self.per_agent = per_agent
+        self.options = options
+        self.option_monitor = None
         self._last = None  # (elapsed, agent_steps) at the previous population point
 
     @classmethod
@@ -69,6 +75,11 @@ class TensorBoardHook:
         trainer.register_op("pre_train", self.pre_train, name=name)
         trainer.register_op("post_episodes", self.post_episodes, name=name)
         trainer.register_op("post_train", self.post_train, name=name)
+        if self.options and getattr(trainer.agent, "bank", None) is not None:
+            from .option_monitor import OptionMonitor
+
+            self.option_monitor = OptionMonitor(self.logger)
+            self.option_monitor.register(trainer, name=f"{name}_options")
 
     def pre_train(self, trainer) -> None:
         self._last = (trainer.wall_time, trainer.agent_steps)

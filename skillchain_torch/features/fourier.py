@@ -41,18 +41,24 @@ class FourierBasis(nn.Module):
         self.order = order
         coefficients = list(itertools.product(range(order + 1), repeat=dim))
         self.register_buffer("coefficients", torch.tensor(coefficients, dtype=dtype))
+        self.register_buffer("_k", torch.arange(order + 1, dtype=dtype), persistent=False)
         self.num_features = len(coefficients)
 
     def forward(self, x: Tensor) -> Tensor:
         """Map states ``[..., dim]`` to features ``[..., num_features]``."""
-        c = self.coefficients
-        x = x.to(c.dtype)
-        # c . x accumulated left to right with elementwise ops, as a sequential implementation
-        # does; no matmul, so each agent's features are independent of the population size.
-        dot = x[..., None, 0] * c[:, 0]
-        for j in range(1, self.dim):
-            dot = dot + x[..., None, j] * c[:, j]
-        return torch.cos(math.pi * dot)
+        lead = x.shape[:-1]
+        x = x.to(self._k.dtype).reshape(-1, self.dim)
+        n = x.shape[0]
+        # c . x accumulated left to right, as a sequential implementation does, but built by
+        # broadcast additions of t_j[k] = x_j * k (k = 0..order): dot[c] = ((t_0[c_0] + t_1[c_1])
+        # + ...), last dimension fastest. Same bits as sum_j x_j * c_j in that order, a handful
+        # of operations instead of a gather or a matmul, and each row (agent) is computed
+        # independently of the others, so features do not depend on the population size.
+        table = (x[:, :, None] * self._k).unsqueeze(2).unbind(1)  # dim x [n, 1, order + 1]
+        dot = table[0]
+        for t in table[1:]:
+            dot = dot.view(n, -1, 1) + t
+        return torch.cos(math.pi * dot.view(n, -1)).reshape(*lead, self.num_features)
 
     def step_size_scale(self) -> Tensor:
         """Per-feature step-size factors ``alpha_i / alpha = 1 / ||c_i||_2`` (1 for ``c = 0``)."""
