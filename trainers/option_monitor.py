@@ -51,7 +51,6 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from skillchain_torch.invariant import rowwise_dot
 from skillchain_torch.options import InitiationClassifier, OptionBank
 
 __all__ = [
@@ -66,7 +65,6 @@ __all__ = [
 
 # Figure 5: xdot and ydot sampled over {-1, -1/2, 0, 1/2, 1} (raw velocities).
 VELOCITIES = (-1.0, -0.5, 0.0, 0.5, 1.0)
-_CHUNK = 8192  # probe points per membership evaluation (bounds the [N, C] distance matrix)
 
 
 def probe_observations(resolution: int = 50, velocities=VELOCITIES,
@@ -101,36 +99,9 @@ def _classifier(source) -> InitiationClassifier:
 @torch.no_grad()
 def contains_many(classifier: InitiationClassifier, agent: int, slot: int,
                   obs: Tensor) -> Tensor:
-    """``BoolTensor [N]``: membership of ``obs [N, 4]`` in agent ``agent``'s slot ``slot``.
-
-    The same rule as :meth:`InitiationClassifier.contains` (which takes one observation per
-    agent): true everywhere for an untrained slot, else ``logit > 0``, and within ``distance``
-    (in ``distance_dims``) of a stored positive example for constrained slots.
-    """
-    clf = classifier
-    p, k = int(agent), int(slot)
-    w, b = clf.weight[p, k], clf.bias[p, k]
-    trained, constrained = bool(clf.trained[p, k]), bool(clf.constrained[p, k])
-    count = int(clf.count[p, k])
-    positives = clf.examples[p, k, :count][clf.labels[p, k, :count]]  # [M, 4]
-    out = []
-    for chunk in obs.to(device=w.device, dtype=w.dtype).split(_CHUNK):
-        if not trained:
-            out.append(torch.ones(chunk.shape[0], dtype=torch.bool, device=w.device))
-            continue
-        member = (rowwise_dot(clf.features(chunk), w[None, :]) + b) > 0
-        if constrained:
-            squared = None
-            for j in clf.distance_dims:
-                diff = positives[None, :, j] - chunk[:, j, None]
-                squared = diff * diff if squared is None else squared + diff * diff
-            if squared is None or squared.shape[1] == 0:
-                near = torch.zeros_like(member)
-            else:
-                near = (squared <= clf.distance * clf.distance).any(-1)
-            member = member & near
-        out.append(member)
-    return torch.cat(out) if out else torch.zeros(0, dtype=torch.bool, device=w.device)
+    """``BoolTensor [N]``: membership of ``obs [N, 4]`` in agent ``agent``'s slot ``slot``
+    (:meth:`InitiationClassifier.contains_points`)."""
+    return classifier.contains_points(agent, slot, obs)
 
 
 def initiation_density(classifier_or_bank, agent: int = 0, slot: int = 0,

@@ -33,6 +33,7 @@ from skillchain_torch.options.status import agent_index, agent_seeds, check_slot
 from skillchain_torch.rng import GOLDEN_GAMMA, logical_rshift, splitmix64, stream_key
 
 _RESERVOIR_STREAM = stream_key(0x1417)
+_POINTS_CHUNK = 8192  # points per membership evaluation (bounds the [N, M] distance matrix)
 REPLACEMENTS = ("reservoir", "ring")
 
 
@@ -183,6 +184,37 @@ class InitiationClassifier(nn.Module):
             near = self.near_positive(obs, self.constrained)
             member = member & (near | ~self.constrained)
         return member
+
+    def contains_points(self, agent: int, slot: int, obs: Tensor) -> Tensor:
+        """Membership ``BoolTensor [N]`` of many observations ``[N, 4]`` in one slot.
+
+        The rule of :meth:`contains` (which takes one observation per agent) for drawing and
+        measuring a set: true everywhere for an untrained slot, else ``logit > 0``, and within
+        ``distance`` (in ``distance_dims``) of a stored positive example for constrained slots.
+        """
+        p, k = int(agent), int(slot)
+        w, b = self.weight[p, k], self.bias[p, k]
+        trained, constrained = bool(self.trained[p, k]), bool(self.constrained[p, k])
+        count = int(self.count[p, k])
+        positives = self.examples[p, k, :count][self.labels[p, k, :count]]  # [M, 4]
+        out = []
+        for chunk in obs.to(device=w.device, dtype=w.dtype).split(_POINTS_CHUNK):
+            if not trained:
+                out.append(torch.ones(chunk.shape[0], dtype=torch.bool, device=w.device))
+                continue
+            member = (rowwise_dot(self.features(chunk), w[None, :]) + b) > 0
+            if constrained:
+                squared = None
+                for j in self.distance_dims:
+                    diff = positives[None, :, j] - chunk[:, j, None]
+                    squared = diff * diff if squared is None else squared + diff * diff
+                if squared is None or squared.shape[1] == 0:
+                    near = torch.zeros_like(member)
+                else:
+                    near = (squared <= self.distance * self.distance).any(-1)
+                member = member & near
+            out.append(member)
+        return torch.cat(out) if out else torch.zeros(0, dtype=torch.bool, device=w.device)
 
     # ----------------------------------------------------------------------------- data
     def add_examples(self, agents: int | Tensor, slots: int | Tensor, obs: Tensor,
