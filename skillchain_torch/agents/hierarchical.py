@@ -105,6 +105,7 @@ class HierarchicalAgent(nn.Module):
         self.bank = bank.to(device)
         self.population, self.slots = bank.population, bank.slots
         self.num_decisions = NUM_PRIMITIVES + self.slots
+        self.order = int(order)
         self.epsilon, self.option_epsilon = float(epsilon), float(option_epsilon)
         self.gamma = float(gamma)
         self.max_option_steps = int(max_option_steps)
@@ -126,6 +127,7 @@ class HierarchicalAgent(nn.Module):
         # Per-agent episode state (all P rows; only the active ones change). Plain attributes,
         # not buffers: they are replaced every step and saved by ``state_dict`` explicitly.
         self.obs = torch.zeros(P, OBS_DIM, **f64)  # current s
+        self.option_code = bank.q_head.encode(self.obs)  # the option heads' code of s
         self.contains = torch.zeros(P, self.slots, dtype=torch.bool, device=device)  # s in I_k
         self.decision_phi = torch.zeros(P, self.features.num_features, **f64)  # phi(s_decision)
         self.decision = torch.zeros(P, **i64)  # in force (< 5 or 5 + k)
@@ -136,6 +138,18 @@ class HierarchicalAgent(nn.Module):
         self.active = torch.ones(P, dtype=torch.bool, device=device)
         self._index = torch.arange(P, device=device)
 
+    # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
+    # parameters, buffers and submodules) costs more than the tensor maths for these.
+    _PLAIN = frozenset({"obs", "contains", "decision_phi", "decision", "option", "action",
+                        "decision_return", "duration", "active", "option_code", "last_q",
+                        "q_obs", "_index", "_starts"})  # fmt: skip
+
+    def __setattr__(self, name, value):
+        if name in self._PLAIN:
+            object.__setattr__(self, name, value)
+        else:
+            super().__setattr__(name, value)
+
     # ------------------------------------------------------------------ pieces
     def top_level_available(self, obs: Tensor, contains: Tensor | None = None) -> Tensor:
         """``[P, 5 + K]``: the primitives (always) and the available options at ``obs``."""
@@ -144,12 +158,23 @@ class HierarchicalAgent(nn.Module):
                                 device=options.device)
         return torch.cat([primitives, options], dim=-1)
 
+    def membership(self, obs: Tensor) -> Tensor:
+        """``[P, K]``: which initiation sets hold ``obs [P, 4]`` (one classifier evaluation per
+        visited state; skill chaining narrows it by its overlap rule)."""
+        return self.bank.classifier.contains(obs)
+
+    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
+        """``[P, K]``: each live option's termination predicate (target event) at ``s'``."""
+        return self.bank.target_reached(next_obs, terminated, self.events, contains=contains)
+
     def _choose(self, obs: Tensor, contains: Tensor, uniforms: Tensor) -> tuple[Tensor, Tensor]:
-        """Top-level epsilon-greedy decision at ``obs`` for all rows; ``(phi, decision)``."""
+        """Top-level epsilon-greedy decision at ``obs`` for all rows; ``(phi, decision)``.
+        The values ``Q(obs, .)`` stay in ``last_q [P, 5 + K]`` for subclasses."""
         phi = self.features(obs)
         q = self.q_head(phi)
+        self.last_q = q
         return phi, epsilon_greedy(q, self.top_level_available(obs, contains), self.epsilon,
-                                   uniforms)
+                                   uniforms, check=False)  # primitives are always available
 
     def _act(self, rows: Tensor, uniforms: Tensor) -> None:
         """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's
@@ -157,11 +182,10 @@ class HierarchicalAgent(nn.Module):
         action = self.decision.clamp(max=NUM_PRIMITIVES - 1)
         executing = rows & (self.option >= 0)
         if bool(executing.any()):
-            q = self.bank.q_head(self.obs)  # [P, K, A]
-            slot = self.option.clamp(min=0)
-            q_opt = q.gather(1, slot[:, None, None].expand(-1, 1, q.shape[-1]))[:, 0]
+            q_opt = self.bank.q_head.slot_values(self.option_code, self.option)  # [P, A]
             all_actions = torch.ones_like(q_opt, dtype=torch.bool)
-            by_option = epsilon_greedy(q_opt, all_actions, self.option_epsilon, uniforms)
+            by_option = epsilon_greedy(q_opt, all_actions, self.option_epsilon, uniforms,
+                                       check=False)  # fmt: skip
             action = torch.where(executing, by_option, action)
         self.action = torch.where(rows, action, self.action)
 
@@ -170,9 +194,11 @@ class HierarchicalAgent(nn.Module):
         ignored): fresh decision and action, 4 uniforms drawn."""
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=rows)
         obs = torch.where(rows[:, None], obs, self.obs)
-        contains = self.bank.classifier.contains(obs)
+        contains = self.membership(obs)
         phi, decision = self._choose(obs, contains, u[:, :2])
         self.obs = obs
+        self.option_code = torch.where(rows[:, None], self.bank.q_head.encode(obs),
+                                       self.option_code)  # fmt: skip
         self.contains = torch.where(rows[:, None], contains, self.contains)
         self._new_decisions(rows, phi, decision)
         self._act(rows, u[:, 2:])
@@ -194,8 +220,9 @@ class HierarchicalAgent(nn.Module):
 
         Returns a dict of ``[P]`` tensors for monitoring: ``decision`` and ``option`` in force
         during this step, ``decision_ended`` (the SMDP update happened), the decision's
-        ``duration`` k and ``decision_return`` R so far, ``smdp_delta`` (0 where no update) and
-        ``option_delta [P, K]`` (intra-option TD errors, 0 outside the initiation sets).
+        ``duration`` k and ``decision_return`` R so far, ``smdp_delta`` (0 where no update),
+        ``option_delta [P, K]`` (intra-option TD errors, 0 outside the initiation sets) and
+        ``reached [P, K]`` (each option's target event at ``s'``).
         """
         bank = self.bank
         terminated = terminated.to(torch.bool) & stepped
@@ -204,15 +231,20 @@ class HierarchicalAgent(nn.Module):
         next_obs = torch.where(stepped[:, None], next_obs, self.obs)
         reward = reward.to(torch.float64)
         reward = torch.where(stepped, reward, torch.zeros_like(reward))
-        contains_next = bank.classifier.contains(next_obs)
-        reached = bank.target_reached(next_obs, terminated, self.events, contains=contains_next)
+        contains_next = self.membership(next_obs)
+        reached = self.targets(next_obs, terminated, contains_next)
         # Intra-option Q-learning: every live option whose initiation set holds s.
+        next_code = bank.q_head.encode(next_obs)
         option_delta = self.option_update(
             bank.q_head, self.obs, self.action, reward, next_obs, terminated, self.contains,
-            reached, learnable=bank.live() & stepped[:, None],
+            reached, learnable=bank.live() & stepped[:, None], code=self.option_code,
+            next_code=next_code,
         )
         # The decision in force accumulates the (discounted) reward.
-        ret = self.decision_return + discount(self.gamma, self.duration) * reward
+        if self.gamma == 1.0:  # gamma^k = 1 exactly: skip the power
+            ret = self.decision_return + reward
+        else:
+            ret = self.decision_return + discount(self.gamma, self.duration) * reward
         self.decision_return = torch.where(stepped, ret, self.decision_return)
         self.duration = torch.where(stepped, self.duration + 1, self.duration)
         executing = self.option >= 0
@@ -226,12 +258,14 @@ class HierarchicalAgent(nn.Module):
         smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
                                  self.decision_return, self.duration.clamp(min=1), phi_next,
                                  d_next, terminated, active=decision_ended)
-        info = {"decision_ended": decision_ended, "duration": self.duration.clone(),
-                "decision_return": self.decision_return.clone(), "option_delta": option_delta,
-                "smdp_delta": smdp_delta, "decision": self.decision.clone(),
-                "option": self.option.clone()}
+        # The state tensors are replaced, never written in place, so no copies are needed.
+        info = {"decision_ended": decision_ended, "duration": self.duration,
+                "decision_return": self.decision_return, "option_delta": option_delta,
+                "smdp_delta": smdp_delta, "decision": self.decision,
+                "option": self.option, "reached": reached}
         continuing = stepped & ~ended
         self.obs = next_obs
+        self.option_code = torch.where(stepped[:, None], next_code, self.option_code)
         self.contains = torch.where(stepped[:, None], contains_next, self.contains)
         self._new_decisions(decision_ended & ~ended, phi_next, d_next)
         self.option = torch.where(ended, torch.full_like(self.option, -1), self.option)
@@ -262,8 +296,10 @@ class HierarchicalAgent(nn.Module):
         updates do not bootstrap, truncated ones do; rows in ``restart_rows`` then decide at
         ``start_obs``."""
         none = torch.zeros_like(self.active)
+        terminated, truncated = self._full(terminated, none), self._full(truncated, none)
         self.transition(self._full(obs, self.obs), self._full(reward, self.decision_return),
-                        self._full(terminated, none), self._full(truncated, none), self.active)
+                        terminated, truncated, self.active)
+        self.episodes_ended(self.active & (terminated | truncated))
         if restart_rows.numel() > 0:
             restart = torch.zeros_like(self.active)
             restart[self._index[restart_rows]] = True
@@ -271,6 +307,10 @@ class HierarchicalAgent(nn.Module):
             start[self._index[restart_rows]] = start_obs.to(start.dtype)
             self._start_decisions(start, restart)
         return self.actions
+
+    def episodes_ended(self, rows: Tensor) -> None:
+        """Agents ``rows [P]`` just ended an episode (before any restart); nothing to do here,
+        skill chaining runs its per-episode rules."""
 
     def compact(self, keep: Tensor) -> None:
         """Keep the active rows where ``keep [n]``; the others stop for good."""
@@ -334,6 +374,7 @@ class HierarchicalAgent(nn.Module):
         self.decision_phi = state["phi"].to(device).clone()
         for name in self._EPISODE:
             setattr(self, name, state["episode"][name].to(device).clone())
+        self.option_code = self.bank.q_head.encode(self.obs)  # a pure function of s
 
     def extra_repr(self) -> str:
         return (f"population={self.population}, slots={self.slots}, "

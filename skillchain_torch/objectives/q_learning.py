@@ -101,6 +101,8 @@ class IntraOptionQLearning(nn.Module):
         in_initiation: Tensor,
         target_reached: Tensor,
         learnable: Tensor | None = None,
+        code: Tensor | None = None,
+        next_code: Tensor | None = None,
     ) -> Tensor:
         """Update every ``(p, k)`` with ``learnable & in_initiation``; return ``delta [P, K]``.
 
@@ -115,6 +117,9 @@ class IntraOptionQLearning(nn.Module):
                 updates from outside it are ignored (paper 5.1).
             target_reached: ``BoolTensor [P, K]``, option k's termination predicate at ``s'``.
             learnable: ``BoolTensor [P, K]`` live slots (default all).
+            code, next_code: ``q_head.encode`` of ``obs`` and ``next_obs`` when the caller
+                already has them (an agent encodes each state once); then ``obs`` and
+                ``next_obs`` are not read.
 
         Returns:
             the TD errors, 0 where nothing was updated.
@@ -130,12 +135,19 @@ class IntraOptionQLearning(nn.Module):
                 raise ValueError(f"{name} must be [P={population}], got {tuple(value.shape)}")
         if not bool(mask.any()):
             return torch.zeros(mask.shape, dtype=torch.float64, device=mask.device)
-        next_q_max = q_head(next_obs).amax(-1)
+        checked = code is None  # a caller passing codes vouches for its inputs
+        code = q_head.encode(obs) if code is None else code
+        next_code = q_head.encode(next_obs) if next_code is None else next_code
+        # Only the updated slots need max_a Q(s', a); others are masked out of the update.
+        bootstrapped = mask & ~target_reached & ~env_terminated.reshape(-1, 1).to(torch.bool)
+        next_q_max = q_head.max_values(next_code, bootstrapped)
         target = option_td_target(
             reward.to(next_q_max.device), next_q_max, target_reached.to(next_q_max.device),
             env_terminated.to(next_q_max.device), self.gamma, self.completion_reward,
         )  # fmt: skip
-        return q_head.td_update(obs, action, target, mask.to(target.device))
+        if checked:
+            return q_head.td_update(obs, action, target, mask.to(target.device))
+        return q_head.td_update_code(code, action, target, mask.to(target.device))
 
     def extra_repr(self) -> str:
         return f"gamma={self.gamma}, completion_reward={self.completion_reward}"

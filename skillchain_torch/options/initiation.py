@@ -273,6 +273,13 @@ class InitiationClassifier(nn.Module):
         self.dirty |= touched
         return touched
 
+    def has_both_classes(self) -> Tensor:
+        """``[P, K]``: the slot stores at least one positive and one negative example."""
+        stored = torch.arange(self.capacity, device=self.labels.device) < self.count[..., None]
+        positive = (self.labels & stored).any(-1)
+        negative = (~self.labels & stored).any(-1)
+        return positive & negative
+
     # ----------------------------------------------------------------------------- fitting
     @torch.no_grad()
     def fit(self, mask: Tensor | None = None) -> Tensor:
@@ -311,15 +318,16 @@ class InitiationClassifier(nn.Module):
     def reset_slots(self, mask: Tensor) -> None:
         """Forget the slots in ``mask [P, K]``: no data, zero weights, true everywhere."""
         mask = check_slot_mask(mask, self.population, self.slots).to(self.seeds.device)
-        self.weight[mask] = 0.0
-        self.bias[mask] = 0.0
-        self.examples[mask] = 0.0
-        self.labels[mask] = False
+        pi, ki = mask.nonzero().unbind(-1)  # index the few slots, not a mask over the stores
+        self.weight[pi, ki] = 0.0
+        self.bias[pi, ki] = 0.0
+        self.examples[pi, ki] = 0.0
+        self.labels[pi, ki] = False
         for name in ("count", "seen", "sweeps_done"):
-            getattr(self, name)[mask] = 0
+            getattr(self, name)[pi, ki] = 0
         for name in ("trained", "constrained", "dirty"):
-            getattr(self, name)[mask] = False
-        self.generation[mask] += 1
+            getattr(self, name)[pi, ki] = False
+        self.generation[pi, ki] += 1
 
     def reset_slot(self, agents: int | Tensor, slot: int | Tensor) -> None:
         self.reset_slots(slot_mask(agents, slot, self.slots, self.population, self.seeds.device))

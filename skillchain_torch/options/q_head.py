@@ -104,6 +104,59 @@ class OptionQHead(nn.Module, ABC):
     def select_agents(self, index, seeds: Tensor | None = None) -> OptionQHead:
         """A new head holding agents ``index`` (repeats allowed: replicate one agent)."""
 
+    # Encoded paths: an agent encodes each visited state once (``encode``) and reuses the
+    # code for acting, bootstrapping and updating. The defaults encode nothing (the code is
+    # the observation); the Fourier head's code is its feature vector.
+    def encode(self, obs: Tensor) -> Tensor:
+        """What the head computes from an observation ``[P, 4]`` before its weights apply."""
+        self._check_obs(obs)
+        return obs
+
+    def forward_code(self, code: Tensor) -> Tensor:
+        """:meth:`forward` from a code of :meth:`encode`: ``[P, K, A]``."""
+        return self(code)
+
+    def slot_values(self, code: Tensor, slot: Tensor) -> Tensor:
+        """``Q_{slot[p]}(s_p, .)``: the values of one slot per agent, ``[P, A]``."""
+        q = self.forward_code(code)
+        k = slot.clamp(min=0)[:, None, None].expand(-1, 1, q.shape[-1])
+        return q.gather(1, k)[:, 0]
+
+    def max_values(self, code: Tensor, mask: Tensor) -> Tensor:
+        """``max_a Q_k(s_p, a)`` for the ``(p, k)`` in ``mask [P, K]``; others unspecified."""
+        return self.forward_code(code).amax(-1)
+
+    def td_update_code(self, code: Tensor, action: Tensor, target: Tensor,
+                       mask: Tensor) -> Tensor:  # fmt: skip
+        """:meth:`td_update` from a code of :meth:`encode`."""
+        return self.td_update(code, action, target, mask)
+
+    def slot_tensors(self) -> dict[str, Tensor]:
+        """The learnable state as tensors with leading dims ``[P, K]`` (views, by name).
+
+        :meth:`read_slots` / :meth:`write_slots` use it to save and restore one slot per agent
+        (skill chaining drops the updates of an unsuccessful execution, paper 5.1).
+        """
+        raise NotImplementedError(f"{type(self).__name__} does not expose its slot tensors")
+
+    def read_slots(self, slot: Tensor) -> dict[str, Tensor]:
+        """A copy of slot ``slot[p]`` of every agent p: ``{name: [P, ...]}``
+        (``slot`` is a ``LongTensor [P]``; negative entries read slot 0)."""
+        agents = torch.arange(self.population, device=slot.device)
+        k = slot.clamp(min=0)
+        return {name: t[agents, k].clone() for name, t in self.slot_tensors().items()}
+
+    @torch.no_grad()
+    def write_slots(self, slot: Tensor, values: dict[str, Tensor], mask: Tensor) -> None:
+        """Put ``values`` (from :meth:`read_slots`) back into slot ``slot[p]`` of the agents
+        in ``mask [P]``; other agents and slots are untouched."""
+        agents = torch.arange(self.population, device=slot.device)
+        k = slot.clamp(min=0)
+        for name, t in self.slot_tensors().items():
+            current = t[agents, k]
+            keep = mask.reshape(-1, *[1] * (current.ndim - 1))
+            t[agents, k] = torch.where(keep, values[name].to(t.dtype), current)
+
     def reset_slot(self, agents: int | Tensor, slot: int | Tensor) -> None:
         """Reset slot ``slot`` (int or ``[P]``) of ``agents`` (index or ``BoolTensor [P]``)."""
         self.reset_slots(slot_mask(agents, slot, self.slots, self.population, self._device()))
@@ -167,26 +220,55 @@ class FourierOptionQHead(OptionQHead):
         return self.basis(obs.to(self.weight.device))
 
     def forward(self, obs: Tensor) -> Tensor:
-        phi = self.features(obs)
-        return rowwise_dot(self.weight, phi[:, None, None, :])
+        return self.forward_code(self.features(obs))
+
+    def encode(self, obs: Tensor) -> Tensor:
+        return self.features(obs)
+
+    def forward_code(self, code: Tensor) -> Tensor:
+        return rowwise_dot(self.weight, code[:, None, None, :])
+
+    def slot_values(self, code: Tensor, slot: Tensor) -> Tensor:
+        agents = torch.arange(self.population, device=self.weight.device)
+        return rowwise_dot(self.weight[agents, slot.clamp(min=0)], code[:, None, :])
+
+    def max_values(self, code: Tensor, mask: Tensor) -> Tensor:
+        # Only the masked slots: each row's sum is the same wherever it sits (rowwise_dot).
+        out = torch.zeros(mask.shape, dtype=self.weight.dtype, device=self.weight.device)
+        pi, ki = mask.nonzero().unbind(-1)
+        out[pi, ki] = rowwise_dot(self.weight[pi, ki], code[pi][:, None, :]).amax(-1)
+        return out
 
     @torch.no_grad()
     def td_update(self, obs: Tensor, action: Tensor, target: Tensor, mask: Tensor) -> Tensor:
         mask = self._check_update(obs, action, target, mask)
-        phi = self.features(obs)
-        agents = torch.arange(self.population, device=self.weight.device)
-        act = torch.where(mask.any(-1), action.to(torch.int64), torch.zeros_like(action))
-        rows = self.weight[agents, :, act]  # [P, K, F]: each agent's row of its own action
-        q_sa = rowwise_dot(rows, phi[:, None, :])
-        delta = torch.where(mask, target.to(q_sa.dtype) - q_sa, torch.zeros_like(q_sa))
-        step = (self.alpha * delta)[..., None] * phi[:, None, :]
-        self.weight[agents, :, act] = torch.where(mask[..., None], rows + step, rows)
+        return self._td_step(self.features(obs), action, target, mask)
+
+    @torch.no_grad()
+    def td_update_code(self, code: Tensor, action: Tensor, target: Tensor,
+                       mask: Tensor) -> Tensor:  # fmt: skip
+        return self._td_step(code, action, target, mask.to(torch.bool))
+
+    def _td_step(self, phi: Tensor, action: Tensor, target: Tensor, mask: Tensor) -> Tensor:
+        # Only the masked (agent, slot) rows of the taken action are read and written back.
+        pi, ki = mask.nonzero().unbind(-1)
+        act = action.to(torch.int64)[pi]
+        rows = self.weight[pi, ki, act]  # [M, F]
+        x = phi[pi]
+        delta_m = target[pi, ki].to(rows.dtype) - rowwise_dot(rows, x)
+        self.weight[pi, ki, act] = rows + (self.alpha * delta_m)[:, None] * x
+        delta = torch.zeros(mask.shape, dtype=rows.dtype, device=rows.device)
+        delta[pi, ki] = delta_m
         return delta
+
+    def slot_tensors(self) -> dict[str, Tensor]:
+        return {"weight": self.weight}
 
     @torch.no_grad()
     def reset_slots(self, mask: Tensor) -> None:
         mask = check_slot_mask(mask, self.population, self.slots)
-        self.weight[mask] = 0.0
+        pi, ki = mask.nonzero().unbind(-1)
+        self.weight[pi, ki] = 0.0
 
     def select_agents(self, index, seeds: Tensor | None = None) -> FourierOptionQHead:
         index = agent_index(index, self.population).to(self.weight.device)
@@ -312,6 +394,9 @@ class MLPOptionQHead(OptionQHead):
                 param.sub_(self.lr * grads[name].reshape(param.shape))
         delta = delta.reshape(self.population, self.slots)
         return torch.where(mask, delta, torch.zeros_like(delta))
+
+    def slot_tensors(self) -> dict[str, Tensor]:
+        return {key: param.data for key, param in self.params.items()}
 
     @torch.no_grad()
     def reset_slots(self, mask: Tensor) -> None:

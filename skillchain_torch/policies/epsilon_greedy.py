@@ -27,7 +27,7 @@ NUM_UNIFORMS = 2
 
 
 def epsilon_greedy(
-    q: Tensor, available: Tensor, epsilon: float | Tensor, uniforms: Tensor
+    q: Tensor, available: Tensor, epsilon: float | Tensor, uniforms: Tensor, check: bool = True
 ) -> Tensor:
     """Pick one available decision per agent.
 
@@ -38,6 +38,8 @@ def epsilon_greedy(
         uniforms: ``float64 [P, 2]`` in [0, 1): column 0 decides exploration (``u0 < epsilon``),
             column 1 picks uniformly among the candidates (all available decisions when
             exploring, else the available maximisers of ``q``: ties are broken uniformly).
+        check: validate shapes, availability and NaNs (two host syncs); an agent's hot loop
+            that guarantees them passes ``False``. The decision is the same either way.
 
     Returns:
         ``LongTensor [P]``.
@@ -45,21 +47,24 @@ def epsilon_greedy(
     Raises:
         ValueError: an agent has no available decision, or NaN among its available values.
     """
-    if q.ndim != 2 or available.shape != q.shape or uniforms.shape != (q.shape[0], NUM_UNIFORMS):
-        raise ValueError(
-            f"expected q [P, D], available [P, D], uniforms [P, 2]; got {tuple(q.shape)}, "
-            f"{tuple(available.shape)}, {tuple(uniforms.shape)}"
-        )
-    available = available.to(torch.bool)
-    if not bool(available.any(-1).all()):
-        agents = (~available.any(-1)).nonzero().flatten().tolist()
-        raise ValueError(f"agents {agents} have no available decision")
-    masked = torch.where(available, q, torch.full_like(q, -torch.inf))
-    if bool(masked.isnan().any()):
+    if check:
+        if (q.ndim != 2 or available.shape != q.shape
+                or uniforms.shape != (q.shape[0], NUM_UNIFORMS)):  # fmt: skip
+            raise ValueError(
+                f"expected q [P, D], available [P, D], uniforms [P, 2]; got {tuple(q.shape)}, "
+                f"{tuple(available.shape)}, {tuple(uniforms.shape)}"
+            )
+        available = available.to(torch.bool)
+        if not bool(available.any(-1).all()):
+            agents = (~available.any(-1)).nonzero().flatten().tolist()
+            raise ValueError(f"agents {agents} have no available decision")
+    masked = torch.where(available, q, -torch.inf)
+    if check and bool(masked.isnan().any()):
         raise ValueError("q has NaN among available decisions")
     # max and == are exact, so the set of maximisers is the same in any layout.
     greedy = available & (masked == masked.amax(-1, keepdim=True))
-    epsilon = torch.as_tensor(epsilon, dtype=uniforms.dtype, device=uniforms.device)
+    if isinstance(epsilon, Tensor):
+        epsilon = epsilon.to(dtype=uniforms.dtype, device=uniforms.device)
     explore = uniforms[:, 0] < epsilon
     candidates = torch.where(explore[:, None], available, greedy)
     count = candidates.sum(-1)
