@@ -1,6 +1,7 @@
 """Agents built from the library's pieces: the hierarchical (options) agent and helpers.
 
 - :class:`HierarchicalAgent`: SMDP Sarsa over primitives + options, intra-option Q-learning.
+- :class:`SkillChainingAgent`: the same agent discovering its options by skill chaining.
 - :func:`make_region_option`: a hand-built "reach the target region" option bank.
 """
 
@@ -9,8 +10,15 @@ from skillchain_torch.agents.hierarchical import (
     NUM_PRIMITIVES,
     HierarchicalAgent,
 )
+from skillchain_torch.agents.skill_chaining import SkillChainingAgent
 
-__all__ = ["HierarchicalAgent", "MAX_OPTION_STEPS", "NUM_PRIMITIVES", "make_region_option"]
+__all__ = [
+    "HierarchicalAgent",
+    "MAX_OPTION_STEPS",
+    "NUM_PRIMITIVES",
+    "SkillChainingAgent",
+    "make_region_option",
+]
 
 
 def __getattr__(name: str):

@@ -1,0 +1,148 @@
+"""``SkillChainingAgent``: the hierarchical agent that discovers its own options (sections 4, 5.1).
+
+A :class:`~skillchain_torch.agents.HierarchicalAgent` (SMDP Sarsa over primitives and options,
+intra-option Q-learning) whose bank starts empty and is filled by
+:class:`~skillchain_torch.discovery.SkillChaining`: reaching the goal from a state no goal
+option covers creates an option; after 10 episodes of gestation it joins the decisions with
+``Q(s, o)`` set to the best value seen when its target fired; its initiation set is learned from
+its executions; once that converges it becomes a target event, and options are created to
+reach it, growing chains and trees backwards from the goal.
+
+Compared with its parent class the agent:
+
+* narrows every membership query by the no-overlap rule (:meth:`membership`),
+* evaluates the base target events once per state and derives every option's target from them
+  (:meth:`targets`),
+* records the states of each execution and, when it ends, adds initiation-set examples,
+  refits the classifier and drops the option's updates if it failed,
+* creates options after each transition and applies the per-episode rules when episodes end.
+
+Example:
+    >>> import torch
+    >>> agent = SkillChainingAgent.build(population=2, slots=4, order=1, seed=0)
+    >>> agent.bank.live().any().item()                 # no options until the goal is reached
+    False
+    >>> obs = torch.tensor([[0.2, 0.9, 0.5, 0.5]] * 2, dtype=torch.float64)
+    >>> agent.begin(obs).shape
+    torch.Size([2])
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from torch import Tensor
+
+from skillchain_torch.discovery import (
+    CONVERGENCE_EPISODES,
+    CONVERGENCE_THRESHOLD,
+    GESTATION_EPISODES,
+    MAX_BRANCHING,
+    SkillChaining,
+)
+from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
+
+from .hierarchical import MAX_OPTION_STEPS, NUM_PRIMITIVES, HierarchicalAgent
+
+__all__ = ["SkillChainingAgent"]
+
+
+class SkillChainingAgent(HierarchicalAgent):
+    """Population-batched skill chaining: P agents, K option slots each, discovered on-line.
+
+    Args:
+        bank: an :class:`OptionBank` (usually empty; :meth:`build` makes the paper's).
+        events: the base target events, goal first (section 4.4).
+        gestation, max_branching, convergence_threshold, convergence_episodes, overlap: the
+            discovery rules (paper: 10, 3, 0.15, 2, on); see
+            :class:`~skillchain_torch.discovery.SkillChaining`.
+        **kwargs: the :class:`HierarchicalAgent` arguments (``order``, ``alpha``, ``gamma``,
+            ``epsilon``, ``seed``, ``option_epsilon``, ``max_option_steps``, ...).
+
+    Attributes:
+        discovery: the :class:`SkillChaining` state; its ``log`` holds the discovery events.
+    """
+
+    def __init__(self, bank: OptionBank, events: Sequence[TerminationPredicate] = (GoalEvent(),),
+                 gestation: int = GESTATION_EPISODES, max_branching: int = MAX_BRANCHING,
+                 convergence_threshold: float = CONVERGENCE_THRESHOLD,
+                 convergence_episodes: int = CONVERGENCE_EPISODES, overlap: bool = True,
+                 **kwargs):  # fmt: skip
+        super().__init__(bank, events=events, **kwargs)
+        self.discovery = SkillChaining(
+            self.bank, self.events, gestation=gestation, max_branching=max_branching,
+            convergence_threshold=convergence_threshold,
+            convergence_episodes=convergence_episodes,
+            max_option_steps=kwargs.get("max_option_steps", MAX_OPTION_STEPS), overlap=overlap,
+        )  # fmt: skip
+        self.q_obs = torch.zeros(self.population, self.num_decisions, dtype=torch.float64,
+                                 device=self.obs.device)  # fmt: skip
+        self._starts = torch.zeros_like(self.active)
+
+    @classmethod
+    def build(cls, population: int, slots: int = 12, order: int = 4, option_order: int = 3,
+              option_alpha: float = 0.0005, seed: int | Tensor = 0,
+              device: torch.device | str | None = None, **kwargs) -> SkillChainingAgent:
+        """The paper's agent with an empty bank of ``slots`` Fourier options per agent."""
+        bank = OptionBank.build(population, slots, order=option_order, alpha=option_alpha,
+                                seed=seed, device=device)  # fmt: skip
+        return cls(bank, order=order, seed=seed, device=device, **kwargs)
+
+    # ------------------------------------------------------------------ hooks
+    def membership(self, obs: Tensor) -> Tensor:
+        return self.discovery.membership(self.bank.classifier.contains(obs))
+
+    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
+        return self.discovery.targets(next_obs, terminated, contains)
+
+    def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
+        super()._start_decisions(obs, rows)
+        self.discovery.start_episodes(self.obs, rows)
+        self.q_obs = torch.where(rows[:, None], self.last_q, self.q_obs)
+        self._begin_executions()
+
+    def _new_decisions(self, rows: Tensor, phi: Tensor, decision: Tensor) -> None:
+        super()._new_decisions(rows, phi, decision)
+        # Snapshots wait until the step's updates (and any dropped ones) are done.
+        self._starts = self._starts | (rows & (decision >= NUM_PRIMITIVES))
+
+    def _begin_executions(self) -> None:
+        self.discovery.start_executions(self._starts, self.option)
+        self._starts = torch.zeros_like(self._starts)
+
+    def transition(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
+                   truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:  # fmt: skip
+        contains, option, decision, q = self.contains, self.option, self.decision, self.q_obs
+        self.discovery.record(stepped & (option >= 0), self.duration, self.obs)
+        info = super().transition(next_obs, reward, terminated, truncated, stepped)
+        created = self.discovery.after_transition(
+            contains=contains, option=option, decision=decision, q=q,
+            contains_next=self.contains, reached=info["reached"], duration=info["duration"],
+            decision_ended=info["decision_ended"], terminated=terminated.to(torch.bool) & stepped,
+            stepped=stepped,
+        )  # fmt: skip
+        if bool(created.any()):  # the new slot changes the memberships at s'
+            self.contains = torch.where(created[:, None], self.membership(self.obs),
+                                        self.contains)  # fmt: skip
+        self.q_obs = torch.where(stepped[:, None], self.last_q, self.q_obs)
+        self._begin_executions()
+        return info
+
+    def episodes_ended(self, rows: Tensor) -> None:
+        self.discovery.end_episodes(rows, self.q_head)
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self, *args, **kwargs):
+        state = super().state_dict()
+        state["discovery"] = self.discovery.state_dict()
+        state["q_obs"] = self.q_obs.clone()
+        return state
+
+    def load_state_dict(self, state, strict: bool = True, assign: bool = False):
+        super().load_state_dict(state)
+        self.discovery.load_state_dict(state["discovery"])
+        self.q_obs = state["q_obs"].to(self.obs.device).clone()
+
+    def extra_repr(self) -> str:
+        return super().extra_repr() + f", discovery={self.discovery!r}"

@@ -1,0 +1,116 @@
+"""Learning initiation sets from executions (paper sections 4.1 and 5.1).
+
+"When the agent executed the option, states on trajectories that reached its goal within 250
+steps were used as positive examples, and the start states of trajectories that did not were
+used as negative examples." And: "updates from unsuccessful on-policy trajectories" were
+ignored, "because their start states were then removed from the initiation set".
+
+:class:`ExecutionTrace` follows the execution in progress of every agent: the states it acted
+in (at most ``max_steps``) and a copy of the option's Q-head slot taken when it started. When
+the execution ends:
+
+* *success*, the option's target event fired at ``s'``: every state it acted in is a
+  positive example;
+* *failure*, it ran ``max_steps`` steps, or the episode terminated elsewhere than at its
+  target: its start state is a negative example, and the option's Q-head slot is put back as
+  it was at the start, dropping the updates of the failed trajectory;
+* neither, when an episode *truncation* (a step limit of the environment, not of the option)
+  cut it short: it was not given its 250 steps, so it teaches nothing either way.
+
+Example:
+    >>> import torch
+    >>> success, failure = execution_outcome(
+    ...     reached=torch.tensor([True, False, False, False]),
+    ...     duration=torch.tensor([3, 250, 7, 7]),
+    ...     terminated=torch.tensor([False, False, True, False]), max_steps=250)
+    >>> success.tolist(), failure.tolist()     # target, timeout, episode over, truncated
+    ([True, False, False, False], [False, True, True, False])
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from skillchain_torch.options import OptionQHead
+
+__all__ = ["execution_outcome", "ExecutionTrace"]
+
+OBS_DIM = 4
+
+
+def execution_outcome(reached: Tensor, duration: Tensor, terminated: Tensor,
+                      max_steps: int) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """``(success, failure)`` of executions that just ended (all ``[P]``).
+
+    Args:
+        reached: the executing option's target fired at ``s'``.
+        duration: steps the execution ran, this one included.
+        terminated: the episode terminated at ``s'``.
+        max_steps: the option's step limit (paper: 250).
+    """
+    success = reached
+    failure = ~reached & ((duration >= max_steps) | terminated)
+    return success, failure
+
+
+class ExecutionTrace:
+    """The states of every agent's execution in progress, and its option's starting weights.
+
+    Args:
+        population: P; max_steps: the longest execution (paper: 250).
+        q_head: the options' :class:`~skillchain_torch.options.OptionQHead` (for the snapshot).
+
+    State (:meth:`state_dict`): ``states [P, max_steps, 4]`` and ``snapshot`` (the Q-head
+    slot of the executing option at its start, per agent).
+    """
+
+    def __init__(self, population: int, max_steps: int, q_head: OptionQHead,
+                 dtype=torch.float64, device=None):  # fmt: skip
+        self.max_steps = int(max_steps)
+        self.q_head = q_head
+        self.states = torch.zeros(population, self.max_steps, OBS_DIM, dtype=dtype,
+                                  device=device)  # fmt: skip
+        slot = torch.zeros(population, dtype=torch.int64, device=device)
+        self.snapshot = q_head.read_slots(slot)
+        self._agents = torch.arange(population, device=device)
+
+    def start(self, rows: Tensor, slot: Tensor) -> None:
+        """Agents in ``rows [P]`` start executing option ``slot [P]``: keep its weights."""
+        current = self.q_head.read_slots(slot)
+        for name, value in current.items():
+            keep = rows.reshape(-1, *[1] * (value.ndim - 1))
+            self.snapshot[name] = torch.where(keep, value, self.snapshot[name])
+
+    def record(self, rows: Tensor, step: Tensor, obs: Tensor) -> None:
+        """Agents in ``rows [P]`` act in ``obs [P, 4]`` as step ``step [P]`` (0-based)."""
+        index = rows.nonzero()[:, 0]
+        self.states[index, step[index].clamp(max=self.max_steps - 1)] = obs[index].to(
+            self.states.dtype)
+
+    def examples(self, slot: Tensor, duration: Tensor, success: Tensor,
+                 failure: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:  # fmt: skip
+        """Initiation-set examples of ended executions, in agent order.
+
+        Returns ``(agents [N], slots [N], obs [N, 4], labels [N])``: the ``duration`` states
+        of each successful execution (positive), the start state of each failed one (negative).
+        """
+        steps = torch.arange(self.max_steps, device=slot.device)
+        positive = success[:, None] & (steps < duration[:, None])
+        negative = failure[:, None] & (steps == 0)
+        take = positive | negative  # [P, T]
+        agents, step = take.nonzero().unbind(-1)
+        return agents, slot[agents], self.states[agents, step], positive[agents, step]
+
+    def drop_updates(self, slot: Tensor, failure: Tensor) -> None:
+        """Put the options of failed executions back as they were when they started."""
+        self.q_head.write_slots(slot, self.snapshot, failure)
+
+    def state_dict(self) -> dict:
+        return {"states": self.states.clone(),
+                "snapshot": {k: v.clone() for k, v in self.snapshot.items()}}
+
+    def load_state_dict(self, state: dict) -> None:
+        device = self.states.device
+        self.states = state["states"].to(device).clone()
+        self.snapshot = {k: v.to(device).clone() for k, v in state["snapshot"].items()}
