@@ -3,7 +3,8 @@
     python benchmarks/compare_curves.py runs/flat runs/given --labels flat "given options" \\
         --out runs/compare.png
 
-Each argument is a run directory written by ``skillchain train`` (``returns.npy``; for a run
+Each argument is a run directory written by ``skillchain train`` (or ``DIR1+DIR2``, their runs
+stacked: a population split over processes) (``returns.npy``; for a run
 still in progress, ``--partial`` reads the returns of its latest checkpoint and keeps only the
 episodes every run has completed). The figure shows every run's mean return per episode with
 its 95% interval over runs (mean +- 1.96 sd / sqrt(n)). The table gives, per episode window,
@@ -40,7 +41,14 @@ def parse_windows(text: str) -> list[tuple[int, int]]:
 
 
 def load_returns(run_dir: str | Path, partial: bool = False) -> tuple[np.ndarray, dict]:
-    """``(returns [runs, episodes], config dict)`` of a run directory."""
+    """``(returns [runs, episodes], config dict)`` of a run directory; ``"A+B"`` stacks the
+    runs of directories A and B (e.g. one population split over two processes with seeds 0
+    and 10: by the seed contract they are the runs of one population with seed 0)."""
+    parts = str(run_dir).split("+")
+    if len(parts) > 1:
+        loaded = [load_returns(part, partial) for part in parts]
+        episodes = min(r.shape[1] for r, _ in loaded)
+        return np.concatenate([r[:, :episodes] for r, _ in loaded]), loaded[0][1]
     run = Path(run_dir)
     config = json.loads((run / "config.json").read_text()) if (run / "config.json").is_file() \
         else {}
@@ -107,7 +115,7 @@ def save_comparison(curves: dict[str, np.ndarray], path: str | Path,
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", nargs="+", type=Path, help="run directories")
+    parser.add_argument("runs", nargs="+", help="run directories (DIR1+DIR2 stacks runs)")
     parser.add_argument("--labels", nargs="+", default=None, help="one label per run")
     parser.add_argument("--out", type=Path, default=Path("compare_curves.png"))
     parser.add_argument("--windows", default=DEFAULT_WINDOWS,
@@ -116,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="read unfinished runs from their latest checkpoint")
     parser.add_argument("--title", default=None)
     args = parser.parse_args(argv)
-    labels = args.labels or [p.name for p in args.runs]
+    labels = args.labels or [Path(p.split("+")[0]).name for p in args.runs]
     if len(labels) != len(args.runs):
         parser.error(f"{len(labels)} labels for {len(args.runs)} runs")
     try:

@@ -1,9 +1,8 @@
 """The agent registry: ``--agent NAME`` -> a class built as ``cls(config, device=...)``.
 
-Adding an agent type (later issues: ``"given-options"``, ``"skill-chaining"``) is one entry
-here; the CLI's ``--agent`` choices and :class:`TrainConfig` validation read this dict. Entries
-are ``"module:Class"`` paths inside this package, imported on first use (so listing the
-choices does not import torch).
+Adding an agent type is one entry here; the CLI's ``--agent`` choices and
+:class:`TrainConfig` validation read this dict. Entries are ``"module:Class"`` paths inside
+this package, imported on first use (so listing the choices does not import torch).
 
 An agent follows the episode protocol of :class:`~.flat.FlatSarsaAgent`: ``begin``,
 ``observe``, ``observe_ends``, ``compact``, ``actions``, ``index``, ``flush``, ``state_dict`` and
@@ -11,7 +10,7 @@ An agent follows the episode protocol of :class:`~.flat.FlatSarsaAgent`: ``begin
 
 Example:
     >>> sorted(AGENTS)
-    ['flat', 'given-options']
+    ['flat', 'given-options', 'skill-chaining']
     >>> agent_class("flat").__name__
     'FlatSarsaAgent'
 """
@@ -25,6 +24,7 @@ __all__ = ["AGENTS", "agent_class", "make_agent"]
 AGENTS: dict[str, str] = {
     "flat": "flat:FlatSarsaAgent",
     "given-options": "given_options:GivenOptionsAgent",
+    "skill-chaining": "skill_chaining:SkillChainingRunAgent",
 }
 
 

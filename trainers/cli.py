@@ -8,6 +8,10 @@
 ``train`` writes ``DIR/config.json``, ``DIR/tb/`` (TensorBoard), ``DIR/checkpoints/``, and at
 the end ``DIR/returns.npy`` (float64 [runs, episodes]), ``DIR/lengths.npy`` (int64),
 ``DIR/learning_curve.png`` and ``DIR/run_info.json`` (wall time, steps per second).
+Skill-chaining runs also write ``DIR/options.pt`` (every agent's options, for ``--agent
+given-options``), ``DIR/n_options.npy`` ([runs, episodes]: options held at each episode's
+end), ``DIR/option_tree.json`` and ``DIR/option_trajectory.png`` (a greedy solution coloured by
+option, as the paper's Figure 4b).
 Invalid arguments exit with status 2 and a message.
 """
 
@@ -33,6 +37,10 @@ OUTPUTS = (
     "learning_curve.png",
     "tb",
     "checkpoints",
+    "options.pt",
+    "n_options.npy",
+    "option_tree.json",
+    "option_trajectory.png",
 )
 # Options that define the run; with --resume the saved config is used instead.
 CONFIG_OPTIONS = (
@@ -49,6 +57,8 @@ CONFIG_OPTIONS = (
     "max_episode_steps",
     "checkpoint_every",
     "options",
+    "options_agent",
+    "slots",
 )
 
 
@@ -106,6 +116,20 @@ def build_parser() -> argparse.ArgumentParser:
         "python -m skillchain_torch.agents.region_option OUT.pt",
     )
     train.add_argument(
+        "--options-agent",
+        type=_options_agent,
+        default=None,
+        metavar="N|each",
+        help="for --agent given-options: start every agent with saved agent N's options "
+        "(default 0), or 'each': agent p takes saved agent p's",
+    )
+    train.add_argument(
+        "--slots",
+        type=int,
+        default=None,
+        help="option slots per agent for --agent skill-chaining (default 12)",
+    )
+    train.add_argument(
         "--checkpoint-every",
         type=int,
         default=None,
@@ -133,6 +157,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _options_agent(text: str):
+    if text == "each":
+        return "each"
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an agent index or 'each', got {text!r}"
+        ) from None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -151,6 +186,8 @@ def main(argv: list[str] | None = None) -> int:
 def _config_from_args(parser, args) -> TrainConfig:
     given = {name: getattr(args, name) for name in CONFIG_OPTIONS}
     given = {k: v for k, v in given.items() if v is not None}
+    if given.get("options_agent") == "each":
+        given["options_agent"] = None
     if args.device is not None:
         given["device"] = args.device
     try:
@@ -228,6 +265,12 @@ def _run(trainer, out: Path, quiet: bool) -> int:
 
     tb = TensorBoardHook.for_run(trainer, out)
     tb.register(trainer)
+    discovery = None
+    if getattr(trainer.agent, "discovery", None) is not None:
+        from .discovery_log import DiscoveryLog
+
+        discovery = DiscoveryLog(tb.logger)
+        discovery.register(trainer)
     bar = ProgressBar(disable=quiet)
     bar.register(trainer)
     try:
@@ -239,6 +282,8 @@ def _run(trainer, out: Path, quiet: bool) -> int:
         return 130
     tb.close()
     trainer.write_results(out)
+    if discovery is not None:
+        _write_discovery(trainer, discovery, out)
     cfg = trainer.config
     save_learning_curve(
         trainer.returns,
@@ -263,6 +308,23 @@ def _run(trainer, out: Path, quiet: bool) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def _write_discovery(trainer, discovery, out: Path) -> None:
+    """``options.pt`` (every agent's bank), ``n_options.npy`` and ``option_tree.json``."""
+    import numpy as np
+
+    from .discovery_log import option_tree
+
+    trainer.agent.bank.save(out / "options.pt")
+    np.save(out / "n_options.npy", discovery.n_options)
+    (out / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent), indent=1) + "\n")
+    # Figure 4b: the best greedy episode of the five agents that ended best.
+    from .option_trajectory import best_greedy_trajectory, save_option_trajectory
+
+    best = np.argsort(-np.nan_to_num(trainer.returns[:, -1], nan=-np.inf))[:5]
+    run = best_greedy_trajectory(trainer.agent, trainer.config.map, agents=best.tolist())
+    save_option_trajectory(run, trainer.config.map, out / "option_trajectory.png")
 
 
 if __name__ == "__main__":

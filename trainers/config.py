@@ -42,7 +42,8 @@ class TrainConfig:
     """A population training run.
 
     Args:
-        agent: registry name of the agent (``"flat"``; see ``skillchain_torch.trainers.AGENTS``).
+        agent: registry name of the agent (``"flat"``, ``"given-options"``,
+            ``"skill-chaining"``; see ``skillchain_torch.trainers.AGENTS``).
         map: a shipped Pinball map name (``MAP_NAMES``).
         runs: P, the number of independent agents (each with its own environment).
         episodes: E, the episodes each agent runs.
@@ -55,6 +56,11 @@ class TrainConfig:
         max_episode_steps: truncate episodes after this many steps (``None``: never). A
             truncated episode bootstraps from its last state (it is not a termination).
         options: OptionBank file of given options (``--agent given-options``).
+        options_agent: which saved agent's options every given-options agent starts with;
+            ``None``: agent p takes saved agent ``p mod N`` (the paper's Figure 4 set-up,
+            each agent given the options one skill-chaining run discovered).
+        slots: K, option slots per agent of ``--agent skill-chaining`` (when all are used the
+            agent creates no more options).
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -74,6 +80,8 @@ class TrainConfig:
     checkpoint_every: int = 25
     device: str = "cpu"
     options: str | None = None
+    options_agent: int | None = 0
+    slots: int = 12
 
     def resolved(self) -> TrainConfig:
         """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``)."""
@@ -99,7 +107,10 @@ class TrainConfig:
             ("epsilon", self.epsilon, 0.0 <= self.epsilon <= 1.0, "in [0, 1]"),
             ("gamma", self.gamma, 0.0 <= self.gamma <= 1.0, "in [0, 1]"),
             ("checkpoint_every", self.checkpoint_every, self.checkpoint_every >= 0, ">= 0"),
+            ("slots", self.slots, self.slots >= 1, ">= 1"),
         ]
+        if self.options_agent is not None:
+            checks.append(("options_agent", self.options_agent, self.options_agent >= 0, ">= 0"))
         if self.alpha is not None:
             ok = math.isfinite(self.alpha) and self.alpha > 0
             checks.append(("alpha", self.alpha, ok, "> 0 and finite"))

@@ -1,7 +1,8 @@
 """``GivenOptionsAgent``: the ``"given-options"`` agent type, options loaded from a file.
 
 ``skillchain train --agent given-options --options PATH ...`` starts every agent of the
-population with agent 0's options of the :class:`~skillchain_torch.options.OptionBank` file at
+population with agent 0's options (``--options-agent N``: agent N's; ``each``: agent p gets
+saved agent p's) of the :class:`~skillchain_torch.options.OptionBank` file at
 ``PATH`` (written by ``OptionBank.save``, e.g. by ``python -m
 skillchain_torch.agents.region_option PATH``). The options keep learning their Q-heads by
 intra-option Q-learning; their initiation sets are used as given (no discovery), and every live
@@ -24,11 +25,19 @@ __all__ = ["GivenOptionsAgent", "load_given_options"]
 
 
 def load_given_options(path, population: int, seed: int = 0,
-                       device: torch.device | str | None = None) -> OptionBank:
-    """Agent 0's options from ``path`` replicated ``population`` times, reseeded ``seed + p``,
-    live slots set to LEARNED."""
+                       device: torch.device | str | None = None,
+                       agent: int | None = 0) -> OptionBank:  # fmt: skip
+    """Saved agent ``agent``'s options from ``path`` replicated ``population`` times (or, with
+    ``agent=None``, saved agent ``p mod N`` for agent p), reseeded ``seed + p``, live slots set
+    to LEARNED."""
     seeds = torch.arange(population, dtype=torch.int64) + int(seed)
-    bank = OptionBank.from_agent(path, 0, population, seeds=seeds, device=device)
+    saved = OptionBank.load(path, device=device)
+    if agent is not None and not 0 <= agent < saved.population:
+        raise ValueError(f"{path} holds agents 0..{saved.population - 1}; options_agent "
+                         f"{agent} is not one of them")  # fmt: skip
+    index = [agent] * population if agent is not None else [
+        p % saved.population for p in range(population)]
+    bank = saved.select_agents(index, seeds)
     bank.set_status(bank.live(), OptionStatus.LEARNED)
     return bank
 
@@ -47,7 +56,8 @@ class GivenOptionsAgent(HierarchicalAgent):
         if not path:
             raise ValueError("the given-options agent needs an options file (--options PATH)")
         device = torch.device(cfg.device if device is None else device)
-        bank = load_given_options(path, cfg.runs, cfg.seed, device=device)
+        bank = load_given_options(path, cfg.runs, cfg.seed, device=device,
+                                  agent=cfg.options_agent)
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device)

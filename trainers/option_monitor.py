@@ -274,9 +274,11 @@ class OptionMonitor:
         agent = self.agent
         self.executions += ended
         self.execution_steps += ended * info["duration"][:, None]
-        terminated = terminated.to(torch.bool) & stepped
-        reached = agent.bank.target_reached(next_obs, terminated, agent.events,
-                                            contains=agent.contains)
+        reached = info.get("reached")
+        if reached is None:  # an agent that does not report its options' targets
+            terminated = terminated.to(torch.bool) & stepped
+            reached = agent.bank.target_reached(next_obs, terminated, agent.events,
+                                                contains=agent.contains)
         success = ended & reached
         self.successes += success
         timeout = ended & ~reached & (info["duration"][:, None] >= agent.max_option_steps)

@@ -108,6 +108,7 @@ class PopulationTrainer:
         self._start = torch.zeros(P, dtype=torch.int64, device=self.device)
         self._ops: dict[str, list[tuple[str, object]]] = {stage: [] for stage in STAGES}
         self._modules: dict[str, object] = {}
+        self._pending_modules: dict[str, dict] = {}  # loaded before their module registered
 
     # ------------------------------------------------------------------ hooks
     def register_op(self, stage: str, op, name: str | None = None) -> None:
@@ -120,10 +121,13 @@ class PopulationTrainer:
         self._ops[stage].append((name, op))
 
     def register_module(self, name: str, module) -> None:
-        """Save ``module.state_dict()`` with the trainer's checkpoints under ``name``."""
+        """Save ``module.state_dict()`` with the trainer's checkpoints under ``name`` (and
+        restore it, when a loaded checkpoint holds that name, even if loaded earlier)."""
         if name in self._modules:
             raise RuntimeError(f"{name} is already registered, choose a different name.")
         self._modules[name] = module
+        if name in self._pending_modules:  # registered after a checkpoint was loaded
+            module.load_state_dict(self._pending_modules.pop(name))
 
     def _call(self, stage: str, *args) -> None:
         for _, op in self._ops[stage]:
@@ -307,9 +311,12 @@ class PopulationTrainer:
         index = self.agent.index
         self._ret = t["partial_return"].to(self.device)[index].clone()
         self._start = self.global_step - t["partial_length"].to(self.device)[index]
-        for name, module in self._modules.items():
-            if name in state["modules"]:
-                module.load_state_dict(state["modules"][name])
+        self._pending_modules = {}
+        for name, saved in state["modules"].items():
+            if name in self._modules:
+                self._modules[name].load_state_dict(saved)
+            else:
+                self._pending_modules[name] = saved
 
     def __repr__(self) -> str:
         c = self.config

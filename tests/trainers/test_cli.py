@@ -38,7 +38,7 @@ def _fails(argv, capsys, message):
         (["--order", "-1"], "order must be >= 0, got -1"),
         (["--max-episode-steps", "0"], "max_episode_steps must be >= 1"),
         (["--checkpoint-every", "-1"], "checkpoint_every must be >= 0"),
-        (["--agent", "skill-chaining"], "invalid choice: 'skill-chaining'"),
+        (["--agent", "options"], "invalid choice: 'options'"),
         (["--runs", "two"], "invalid int value: 'two'"),
         (["--threads", "0"], "--threads must be >= 1"),
     ],

@@ -1,0 +1,116 @@
+"""Skill chaining through the trainer and the CLI: reproducibility, resume, outputs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from skillchain_torch.agents import SkillChainingAgent
+from skillchain_torch.options import OptionBank, OptionStatus
+from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+from skillchain_torch.trainers.checkpoint import load_checkpoint
+from skillchain_torch.trainers.cli import main
+from skillchain_torch.trainers.discovery_log import DiscoveryLog, option_tree
+
+# pinball_box: an open box where random play finds the hole within a few hundred steps, so
+# agents create options in their first episodes, at different episodes.
+BOX = dict(agent="skill-chaining", map="pinball_box", max_episode_steps=300, slots=4)
+
+
+def trainer_for(runs, seed, episodes=8, gestation=2, **kwargs):
+    """A trainer whose agents gestate 2 episodes, so options join and learn in a short run."""
+    config = TrainConfig(runs=runs, seed=seed, episodes=episodes, **{**BOX, **kwargs})
+    trainer = PopulationTrainer(config, **({"out_dir": kwargs.pop("out_dir")}
+                                           if "out_dir" in kwargs else {}))  # fmt: skip
+    bank = OptionBank.build(runs, config.slots, seed=seed)
+    trainer.agent = SkillChainingAgent(bank, order=4, alpha=0.001, seed=seed,
+                                       gestation=gestation)  # fmt: skip
+    return trainer
+
+
+@pytest.mark.slow
+def test_agent_alone_equals_agent_in_population():
+    population = trainer_for(3, seed=5).train()
+    created = population.agent.bank.created_episode
+    assert len({tuple(row.tolist()) for row in created}) > 1  # spawned at different episodes
+    assert (population.agent.bank.status >= OptionStatus.LEARNING).any()
+    for p in range(3):
+        alone = trainer_for(1, seed=5 + p).train()
+        assert np.array_equal(alone.returns[0], population.returns[p])
+        for name in ("status", "parent", "target_event", "created_episode"):
+            assert torch.equal(getattr(alone.agent.bank, name)[0],
+                               getattr(population.agent.bank, name)[p]), name
+        assert torch.equal(alone.agent.bank.q_head.weight[0],
+                           population.agent.bank.q_head.weight[p])
+        assert torch.equal(alone.agent.bank.classifier.weight[0],
+                           population.agent.bank.classifier.weight[p])
+        assert torch.equal(alone.agent.q_head.weight[0], population.agent.q_head.weight[p])
+
+
+def test_resume_is_bit_identical(tmp_path):
+    straight = trainer_for(2, seed=1, episodes=6).train()
+    first = trainer_for(2, seed=1, episodes=6)
+    first.out_dir = tmp_path
+    first.train(max_agent_steps=1500)
+    path = first.save_checkpoint(tmp_path / "mid.pt")
+    resumed = trainer_for(2, seed=1, episodes=6)
+    load_checkpoint(path, resumed)
+    resumed.train()
+    assert np.array_equal(resumed.returns, straight.returns)
+    assert torch.equal(resumed.agent.bank.status, straight.agent.bank.status)
+    assert torch.equal(resumed.agent.bank.q_head.weight, straight.agent.bank.q_head.weight)
+    assert torch.equal(resumed.agent.bank.classifier.examples,
+                       straight.agent.bank.classifier.examples)
+    assert torch.equal(resumed.agent.q_head.weight, straight.agent.q_head.weight)
+
+
+def test_discovery_log_counts_options_per_episode():
+    trainer = trainer_for(2, seed=0, episodes=5)
+    log = DiscoveryLog()
+    log.register(trainer)
+    trainer.train()
+    live = trainer.agent.bank.live().sum(-1).numpy()
+    assert (log.n_options >= 0).all() and np.array_equal(log.n_options[:, -1], live)
+    assert (np.diff(log.n_options, axis=1) >= 0).all()  # slots are never freed
+    assert log.totals["created"] == live.sum()
+    tree = option_tree(trainer.agent)
+    assert [len(a["options"]) for a in tree["agents"]] == live.tolist()
+    for agent in tree["agents"]:
+        for option in agent["options"]:
+            assert (option["target"] == "goal") == (option["parent"] == -1)
+            assert option["depth"] >= 1
+
+
+def test_cli_writes_discovery_outputs_loadable_as_given_options(tmp_path, capsys):
+    out = tmp_path / "sc"
+    argv = ["train", "--agent", "skill-chaining", "--map", "pinball_box", "--runs", "2",
+            "--episodes", "3", "--max-episode-steps", "300", "--slots", "3", "--quiet",
+            "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    for name in ("returns.npy", "options.pt", "n_options.npy", "option_tree.json",
+                 "learning_curve.png", "option_trajectory.png"):  # fmt: skip
+        assert (out / name).is_file(), name
+    n_options = np.load(out / "n_options.npy")
+    assert n_options.shape == (2, 3) and n_options.dtype == np.int64
+    bank = OptionBank.load(out / "options.pt")
+    assert bank.population == 2 and bank.slots == 3
+    assert np.array_equal(bank.live().sum(-1).numpy(), n_options[:, -1])
+    tree = json.loads((out / "option_tree.json").read_text())
+    assert tree["slots"] == 3 and len(tree["agents"]) == 2
+    given = tmp_path / "given"
+    assert main(["train", "--agent", "given-options", "--options", str(out / "options.pt"),
+                 "--options-agent", "each", "--map", "pinball_box", "--runs", "3",
+                 "--episodes", "1", "--max-episode-steps", "50", "--quiet",
+                 "--out", str(given)]) == 0  # fmt: skip
+    assert json.loads((given / "config.json").read_text())["options_agent"] is None
+
+
+def test_cli_errors(tmp_path, capsys):
+    for argv, message in ((["--slots", "0"], "slots must be >= 1, got 0"),
+                          (["--options-agent", "x"], "expected an agent index or 'each'")):
+        with pytest.raises(SystemExit):
+            main(["train", "--agent", "skill-chaining", "--out", str(tmp_path / "x"), *argv])
+        assert message in capsys.readouterr().err
