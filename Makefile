@@ -1,5 +1,5 @@
 # Two entry points that work on a fresh machine with nothing but Python:
-#   make demo   a short run on Pinball: TensorBoard logs and a learning-curve figure under runs/demo
+#   make demo   a short skill-chaining run on Pinball: TensorBoard logs and figures under runs/demo
 #   make test   the whole test suite
 # Both create .venv on first use. torch is pinned first so pip takes the local CPU build
 # instead of pulling several GB of CUDA wheels.
@@ -25,8 +25,8 @@ lint: $(VENV)/.installed
 	$(VENV)/bin/ruff check .
 
 demo: $(VENV)/.installed
-	$(VENV)/bin/skillchain train --agent flat --map pinball_simple_single --runs 8 --episodes 30 --seed 0 --out runs/demo --overwrite
-	@echo "TensorBoard: $(VENV)/bin/tensorboard --logdir runs/demo/tb ; figure: runs/demo/learning_curve.png"
+	$(VENV)/bin/skillchain train --agent skill-chaining --map pinball_simple_single --runs 4 --episodes 30 --seed 0 --out runs/demo --overwrite
+	@echo "TensorBoard: $(VENV)/bin/tensorboard --logdir runs/demo/tb ; figures: runs/demo/learning_curve.png runs/demo/option_trajectory.png"
 
 bench: $(VENV)/.installed
 	$(PY) benchmarks/env_throughput.py

@@ -1,4 +1,5 @@
-"""Training throughput of the flat Sarsa agent (environment, decision and update together).
+"""Training throughput of the flat Sarsa and skill-chaining agents (environment, decision and
+update together).
 
     python benchmarks/train_throughput.py            # P = 1, 10, 100 and a short population run
     python benchmarks/train_throughput.py --full     # ... and the paper's 100 x 250 run
@@ -21,6 +22,7 @@ import argparse
 import itertools
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -91,6 +93,36 @@ class NumpySarsa:
         return steps / (time.perf_counter() - begin)
 
 
+OPTIONS = Path(__file__).parent / "data" / "skill_chaining_options.pt"
+
+
+def time_skill_chaining(population: int, agent_steps: int, threads: int,
+                        repeats: int = 2) -> float:  # fmt: skip
+    """Best rate (agent steps / s) of skill-chaining agents with options live.
+
+    Every agent starts with the options one agent discovered in a real run
+    (``benchmarks/data/skill_chaining_options.pt``: learned, learning and gestating slots of a
+    12-slot bank) and discovery stays on, so the timed steps pay for everything options cost:
+    classifier and target evaluations, option policies, intra-option updates, examples, fits
+    and new options.
+    """
+    from skillchain_torch.options import OptionBank
+
+    best = 0.0
+    for r in range(repeats):
+        cfg = TrainConfig(agent="skill-chaining", map=MAP, runs=population, episodes=10_000,
+                          seed=r, slots=12)  # fmt: skip
+        trainer = PopulationTrainer(cfg, num_threads=threads)
+        seeds = torch.arange(population, dtype=torch.int64) + r
+        given = OptionBank.from_agent(OPTIONS, 0, population, seeds=seeds)
+        trainer.agent.bank.load_state_dict(given.state_dict())
+        trainer.train(max_agent_steps=20 * population)
+        start, done = time.perf_counter(), trainer.agent_steps
+        trainer.train(max_agent_steps=done + agent_steps)
+        best = max(best, (trainer.agent_steps - done) / (time.perf_counter() - start))
+    return best
+
+
 def time_population_run(runs: int, episodes: int, threads: int) -> tuple[float, int]:
     cfg = TrainConfig(map=MAP, runs=runs, episodes=episodes, seed=0, checkpoint_every=0)
     trainer = PopulationTrainer(cfg, num_threads=threads)
@@ -115,6 +147,15 @@ def main() -> None:
     for population in (1, 10, 100):
         rate = time_trainer(population, args.steps, args.threads)
         print(f"{population:>5} | {rate:>14,.0f} | {peer:>11,.0f} | {rate / peer:>6.2f}")
+    print("\nskill chaining with options live (12 slots), same run; cost = time per agent "
+          "step relative to flat (target <= 2.5 at P = 100)")
+    print(f"{'P':>5} | {'flat steps/s':>13} | {'skill chaining':>14} | {'cost':>6}")
+    print(f"{'-' * 5}-|-{'-' * 13}-|-{'-' * 14}-|-{'-' * 6}")
+    for population in (1, 100):
+        steps = args.steps // 4 if population == 1 else args.steps
+        flat = time_trainer(population, steps, args.threads, repeats=2)
+        options = time_skill_chaining(population, steps, args.threads)
+        print(f"{population:>5} | {flat:>13,.0f} | {options:>14,.0f} | {flat / options:>6.2f}")
     runs, episodes = (100, 250) if args.full else (100, 5)
     wall, steps = time_population_run(runs, episodes, args.threads)
     note = "" if args.full else " (short version; --full times the paper's 100 x 250)"

@@ -142,7 +142,7 @@ class HierarchicalAgent(nn.Module):
     # parameters, buffers and submodules) costs more than the tensor maths for these.
     _PLAIN = frozenset({"obs", "contains", "decision_phi", "decision", "option", "action",
                         "decision_return", "duration", "active", "option_code", "last_q",
-                        "q_obs", "_index", "_starts"})  # fmt: skip
+                        "last_phi", "q_decision", "_index", "_starts"})  # fmt: skip
 
     def __setattr__(self, name, value):
         if name in self._PLAIN:
@@ -167,12 +167,17 @@ class HierarchicalAgent(nn.Module):
         """``[P, K]``: each live option's termination predicate (target event) at ``s'``."""
         return self.bank.target_reached(next_obs, terminated, self.events, contains=contains)
 
-    def _choose(self, obs: Tensor, contains: Tensor, uniforms: Tensor) -> tuple[Tensor, Tensor]:
-        """Top-level epsilon-greedy decision at ``obs`` for all rows; ``(phi, decision)``.
-        The values ``Q(obs, .)`` stay in ``last_q [P, 5 + K]`` for subclasses."""
+    def _choose(self, obs: Tensor, contains: Tensor, uniforms: Tensor,
+                rows: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
+        """Top-level epsilon-greedy decision at ``obs``; ``(phi, decision)``.
+
+        Only the agents in ``rows [P]`` (default all) need a decision: an executing option that
+        goes on needs none, and the 5 + K values are the top level's largest cost. Other rows'
+        decisions are meaningless. ``phi`` and ``Q(obs, .)`` stay in ``last_phi`` and
+        ``last_q`` for subclasses (``last_q`` valid on ``rows``)."""
         phi = self.features(obs)
-        q = self.q_head(phi)
-        self.last_q = q
+        q = self.q_head(phi) if rows is None else self.q_head.forward_rows(phi, rows)
+        self.last_phi, self.last_q = phi, q
         return phi, epsilon_greedy(q, self.top_level_available(obs, contains), self.epsilon,
                                    uniforms, check=False)  # primitives are always available
 
@@ -195,7 +200,7 @@ class HierarchicalAgent(nn.Module):
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=rows)
         obs = torch.where(rows[:, None], obs, self.obs)
         contains = self.membership(obs)
-        phi, decision = self._choose(obs, contains, u[:, :2])
+        phi, decision = self._choose(obs, contains, u[:, :2], rows=rows)
         self.obs = obs
         self.option_code = torch.where(rows[:, None], self.bank.q_head.encode(obs),
                                        self.option_code)  # fmt: skip
@@ -254,7 +259,7 @@ class HierarchicalAgent(nn.Module):
         decision_ended = stepped & (~executing | option_stops | ended)
         # Next top-level decision at s' (also the bootstrap decision d').
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
-        phi_next, d_next = self._choose(next_obs, contains_next, u[:, :2])
+        phi_next, d_next = self._choose(next_obs, contains_next, u[:, :2], rows=decision_ended)
         smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
                                  self.decision_return, self.duration.clamp(min=1), phi_next,
                                  d_next, terminated, active=decision_ended)

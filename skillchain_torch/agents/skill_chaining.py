@@ -76,8 +76,10 @@ class SkillChainingAgent(HierarchicalAgent):
             convergence_episodes=convergence_episodes,
             max_option_steps=kwargs.get("max_option_steps", MAX_OPTION_STEPS), overlap=overlap,
         )  # fmt: skip
-        self.q_obs = torch.zeros(self.population, self.num_decisions, dtype=torch.float64,
-                                 device=self.obs.device)  # fmt: skip
+        # Q(s, d) of the decision d in force at the current state s, valued when s was reached
+        # (before that step's update): the samples of gestation.
+        self.q_decision = torch.zeros(self.population, dtype=torch.float64,
+                                      device=self.obs.device)  # fmt: skip
         self._starts = torch.zeros_like(self.active)
 
     @classmethod
@@ -99,7 +101,8 @@ class SkillChainingAgent(HierarchicalAgent):
     def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
         super()._start_decisions(obs, rows)
         self.discovery.start_episodes(self.obs, rows)
-        self.q_obs = torch.where(rows[:, None], self.last_q, self.q_obs)
+        chosen = self.last_q.gather(1, self.decision[:, None])[:, 0]
+        self.q_decision = torch.where(rows, chosen, self.q_decision)
         self._begin_executions()
 
     def _new_decisions(self, rows: Tensor, phi: Tensor, decision: Tensor) -> None:
@@ -113,11 +116,11 @@ class SkillChainingAgent(HierarchicalAgent):
 
     def transition(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
                    truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:  # fmt: skip
-        contains, option, decision, q = self.contains, self.option, self.decision, self.q_obs
+        contains, option, value = self.contains, self.option, self.q_decision
         self.discovery.record(stepped & (option >= 0), self.duration, self.obs)
         info = super().transition(next_obs, reward, terminated, truncated, stepped)
         created = self.discovery.after_transition(
-            contains=contains, option=option, decision=decision, q=q,
+            contains=contains, option=option, value=value,
             contains_next=self.contains, reached=info["reached"], duration=info["duration"],
             decision_ended=info["decision_ended"], terminated=terminated.to(torch.bool) & stepped,
             stepped=stepped,
@@ -125,7 +128,13 @@ class SkillChainingAgent(HierarchicalAgent):
         if bool(created.any()):  # the new slot changes the memberships at s'
             self.contains = torch.where(created[:, None], self.membership(self.obs),
                                         self.contains)  # fmt: skip
-        self.q_obs = torch.where(stepped[:, None], self.last_q, self.q_obs)
+        # New decisions were valued before this step's update; an agent going on with its
+        # option had no update this step, so its value now is the value then.
+        decided = info["decision_ended"]
+        chosen = self.last_q.gather(1, self.decision[:, None])[:, 0]
+        going_on = self.q_head.q_value(self.last_phi, self.decision)
+        value_next = torch.where(decided, chosen, going_on)
+        self.q_decision = torch.where(stepped, value_next, self.q_decision)
         self._begin_executions()
         return info
 
@@ -136,13 +145,13 @@ class SkillChainingAgent(HierarchicalAgent):
     def state_dict(self, *args, **kwargs):
         state = super().state_dict()
         state["discovery"] = self.discovery.state_dict()
-        state["q_obs"] = self.q_obs.clone()
+        state["q_decision"] = self.q_decision.clone()
         return state
 
     def load_state_dict(self, state, strict: bool = True, assign: bool = False):
         super().load_state_dict(state)
         self.discovery.load_state_dict(state["discovery"])
-        self.q_obs = state["q_obs"].to(self.obs.device).clone()
+        self.q_decision = state["q_decision"].to(self.obs.device).clone()
 
     def extra_repr(self) -> str:
         return super().extra_repr() + f", discovery={self.discovery!r}"

@@ -157,15 +157,15 @@ class SkillChaining:
         if bool(rows.any()):
             self.trace.start(rows, slot)
 
-    def after_transition(self, *, contains: Tensor, option: Tensor, decision: Tensor,
-                         q: Tensor, contains_next: Tensor, reached: Tensor, duration: Tensor,
+    def after_transition(self, *, contains: Tensor, option: Tensor, value: Tensor,
+                         contains_next: Tensor, reached: Tensor, duration: Tensor,
                          decision_ended: Tensor, terminated: Tensor,
                          stepped: Tensor) -> Tensor:  # fmt: skip
         """Apply the rules to the transitions ``s -> s'`` of the rows in ``stepped [P]``.
 
         Args:
-            contains, option, decision, q: at ``s``: memberships ``[P, K]``, the executing
-                slot (-1 none), the decision in force, the top-level ``Q(s, .) [P, 5 + K]``.
+            contains, option, value: at ``s``: memberships ``[P, K]``, the executing slot
+                (-1 none), and the top-level ``Q(s, d) [P]`` of the decision d in force.
             contains_next, reached: at ``s'``: memberships and each option's target ``[P, K]``.
             duration, decision_ended: the decision's steps so far and whether it ended now.
             terminated: the episode terminated at ``s'`` ``[P]``.
@@ -177,7 +177,7 @@ class SkillChaining:
         bank = self.bank
         self._finish_executions(option, reached, duration, decision_ended & stepped,
                                 terminated)  # fmt: skip
-        sample = q.gather(1, decision[:, None])[:, 0]  # Q(s, d) of the decision in force
+        sample = value  # Q(s, d) of the decision in force
         gestating = bank.status == OptionStatus.GESTATING
         if bool(gestating.any()):
             before = target_indicator(bank, self.base_now, contains)

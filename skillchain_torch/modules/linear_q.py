@@ -67,6 +67,15 @@ class LinearQHead(nn.Module):
         self._check_phi(phi)
         return rowwise_dot(self.weight, phi[:, None, :].to(self.weight.dtype))
 
+    def forward_rows(self, phi: Tensor, rows: Tensor) -> Tensor:
+        """``forward`` for the agents in ``rows [P]`` only (bit-equal there); other rows 0."""
+        self._check_phi(phi)
+        index = rows.nonzero()[:, 0]
+        q = torch.zeros(self.population, self.num_decisions, dtype=self.weight.dtype,
+                        device=self.weight.device)  # fmt: skip
+        q[index] = rowwise_dot(self.weight[index], phi[index][:, None, :].to(self.weight.dtype))
+        return q
+
     def q_value(self, phi: Tensor, decision: Tensor) -> Tensor:
         """``Q(s_p, decision_p)`` for each agent: ``[P]``; bit-equal to ``forward`` gathered."""
         self._check_phi(phi)
