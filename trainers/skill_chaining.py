@@ -5,8 +5,9 @@
 5.1): the top level as the flat agent (Sarsa, order 4 / alpha 0.001 on simple maps, order 5 /
 0.0005 on hard maps, epsilon 0.01, gamma 1); options with an order-3 Fourier Q-head
 (alpha_o = 0.0005, epsilon 0.01), logistic initiation sets (2nd-order features, eta = 0.1,
-100 sweeps), gestation 10 episodes, convergence 0.15 twice, distance 0.1, branching 3, and
-``config.slots`` option slots per agent. The goal is the only initial target event.
+100 sweeps, the two classes weighted equally), gestation 10 episodes, convergence 0.15
+twice, distance 0.1, branching 3, and ``config.slots`` option slots per agent. The goal is
+the only initial target event.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ class SkillChainingRunAgent(SkillChainingAgent):
         device = torch.device(cfg.device if device is None else device)
         from skillchain_torch.options import OptionBank
 
-        bank = OptionBank.build(cfg.runs, cfg.slots, seed=cfg.seed, device=device)
+        # Class-balanced initiation-set fits: see SkillChainingAgent.build.
+        bank = OptionBank.build(cfg.runs, cfg.slots, seed=cfg.seed, device=device, balanced=True)
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device)

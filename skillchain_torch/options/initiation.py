@@ -64,6 +64,11 @@ class InitiationClassifier(nn.Module):
         replacement: ``"reservoir"`` (default): once a slot has seen ``n >= C`` examples, the
             ``n``-th replaces a uniformly drawn stored one with probability ``C / (n + 1)``, so
             the store is a uniform sample of everything seen; ``"ring"``: the newest C.
+        balanced: weight the two classes equally in the loss (each class's examples share half
+            of it), as ``class_weight="balanced"`` does in scikit-learn. Skill chaining turns
+            a successful execution into up to 250 positive examples and a failed one into a
+            single negative, so unweighted the positives outvote the failures and the set
+            stays wide where the option fails (see ``SkillChainingAgent``).
         seed: int (agent p uses ``seed + p``) or ``LongTensor [P]``: the reservoir's draws are a
             hash of (agent seed, slot, slot generation, example index), independent of P.
 
@@ -96,6 +101,7 @@ class InitiationClassifier(nn.Module):
         distance: float = 0.1,
         distance_dims: tuple[int, ...] | list[int] | None = None,
         replacement: str = "reservoir",
+        balanced: bool = False,
         seed: int | Tensor = 0,
         dtype: torch.dtype | str = torch.float64,
         device: torch.device | str | None = None,
@@ -112,11 +118,12 @@ class InitiationClassifier(nn.Module):
         self.population, self.slots, self.capacity = population, slots, capacity
         self.lr, self.sweeps, self.distance = float(lr), int(sweeps), float(distance)
         self.distance_dims, self.replacement = dims, replacement
+        self.balanced = bool(balanced)
         self._squared_distance = self.distance * self.distance  # no sqrt per stored example
         self.config: dict[str, Any] = dict(
             population=population, slots=slots, degree=degree, lr=self.lr, sweeps=self.sweeps,
             capacity=capacity, distance=self.distance, distance_dims=list(dims),
-            replacement=replacement, dtype=dtype_name(dtype),
+            replacement=replacement, balanced=self.balanced, dtype=dtype_name(dtype),
         )  # fmt: skip
         self.features = PolynomialFeatures(OBS_DIM, degree, dtype=dtype).to(device)
         self.num_features = self.features.num_features
@@ -295,13 +302,23 @@ class InitiationClassifier(nn.Module):
             y = self.labels[pi, ki].to(x.dtype)
             stored = torch.arange(self.capacity, device=x.device) < self.count[pi, ki][:, None]
             n = self.count[pi, ki].to(x.dtype)
+            if self.balanced:  # each example weighs 1 / (2 * its class's count)
+                positives = rowwise_sum(torch.where(stored, y, torch.zeros_like(y)))
+                negatives = n - positives
+                share = torch.where(y > 0, 0.5 / positives.clamp(min=1.0)[:, None],
+                                    0.5 / negatives.clamp(min=1.0)[:, None])  # fmt: skip
             w, b = self.weight[pi, ki], self.bias[pi, ki]
             zero = torch.zeros((), dtype=x.dtype, device=x.device)
             for _ in range(self.sweeps):
                 z = rowwise_dot(x, w[:, None, :]) + b[:, None]
                 err = torch.where(stored, 1.0 / (1.0 + torch.exp(-z)) - y, zero)  # [M, C]
-                w = w - self.lr * (rowwise_dot(xt, err[:, None, :]) / n[:, None])
-                b = b - self.lr * (rowwise_sum(err) / n)
+                if self.balanced:
+                    err = err * share
+                    w = w - self.lr * rowwise_dot(xt, err[:, None, :])
+                    b = b - self.lr * rowwise_sum(err)
+                else:  # the plain mean, in the order the unweighted fit always used
+                    w = w - self.lr * (rowwise_dot(xt, err[:, None, :]) / n[:, None])
+                    b = b - self.lr * (rowwise_sum(err) / n)
             self.weight[pi, ki] = w
             self.bias[pi, ki] = b
             self.sweeps_done[pi, ki] += self.sweeps

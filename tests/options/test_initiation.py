@@ -231,3 +231,21 @@ def test_near_positive_on_some_slots_equals_the_full_check():
     assert bool(full.any()) and not bool(full.all())
     some = torch.rand(3, 4, generator=gen) < 0.5
     assert torch.equal(clf.near_positive(obs, some), full & some)
+
+
+def test_balanced_fit_lets_one_failure_outvote_many_successes():
+    # 40 positives around x = 0.7 and one negative at x = 0.2 (a failed start state).
+    g = torch.Generator().manual_seed(3)
+    pos = torch.rand(40, 4, dtype=torch.float64, generator=g) * 0.2 + 0.6
+    neg = torch.tensor([[0.2, 0.7, 0.7, 0.7]], dtype=torch.float64)
+    obs = torch.cat([pos, neg])
+    labels = torch.cat([torch.ones(40, dtype=torch.bool), torch.zeros(1, dtype=torch.bool)])
+    logits = {}
+    for balanced in (False, True):
+        clf = InitiationClassifier(1, 1, capacity=64, balanced=balanced)
+        clf.add_examples(0, 0, obs, labels)
+        clf.fit()
+        logits[balanced] = (clf.logit(neg)[0, 0].item(), clf.logit(pos[:1])[0, 0].item())
+        assert clf.config["balanced"] is balanced
+    assert logits[False][0] > 0  # plain: the failure's start stays inside the set
+    assert logits[True][0] < 0 < logits[True][1]  # balanced: out, the successes stay in
