@@ -90,6 +90,25 @@ def comparison_table(curves: dict[str, np.ndarray], windows) -> str:
     return "\n".join(lines)
 
 
+def spread_table(curves: dict[str, np.ndarray], windows, good: float = 9000.0) -> str:
+    """Consistency across runs: per window, the standard deviation over runs of each run's
+    mean return, and the share of episodes with a return of at least ``good``."""
+    names = list(curves)
+    header = "| episodes | " + " | ".join(f"{n}: sd over runs, share >= {good:,.0f}"
+                                          for n in names) + " |"  # fmt: skip
+    lines = [header, "|" + "---|" * (1 + len(names))]
+    for first, last in windows:
+        if any(r.shape[1] < last for r in curves.values()):
+            continue
+        cells = []
+        for r in curves.values():
+            window = r[:, first - 1 : last]
+            per_run = window.mean(axis=1)
+            cells.append(f"{per_run.std(ddof=1):,.0f}, {(window >= good).mean():.2f}")
+        lines.append(f"| {first}-{last} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def save_comparison(curves: dict[str, np.ndarray], path: str | Path,
                     title: str | None = None) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -141,6 +160,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{label}: {r.shape[0]} runs x {r.shape[1]} episodes")
     print()
     print(comparison_table(curves, windows))
+    print()
+    print(spread_table(curves, windows))
     print(f"\nfigure: {args.out}")
     return 0
 

@@ -33,6 +33,12 @@ _EXPORTS = {
     "plot_learning_curve": "plots",
     "save_learning_curve": "plots",
     "summarize": "summary",
+    "DiscoveryLog": "discovery_log",
+    "option_tree": "discovery_log",
+    "greedy_trajectory": "option_trajectory",
+    "best_greedy_trajectory": "option_trajectory",
+    "plot_option_trajectory": "option_trajectory",
+    "SkillChainingRunAgent": "skill_chaining",
 }
 
 __all__ = sorted(_EXPORTS)
