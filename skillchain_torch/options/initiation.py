@@ -187,8 +187,10 @@ class InitiationClassifier(nn.Module):
         """Initiation-set membership ``[P, K]``: true everywhere for an untrained slot, else
         ``logit > 0`` (``sigmoid > 1/2``), and near a positive example for constrained slots."""
         member = (self.logit(obs) > 0) | ~self.trained
-        if bool(self.constrained.any()):
-            near = self.near_positive(obs, self.constrained)
+        # The distance test (C stored examples per slot) only where the logit said yes.
+        check = self.constrained & member
+        if bool(check.any()):
+            near = self.near_positive(obs, check)
             member = member & (near | ~self.constrained)
         return member
 
