@@ -114,3 +114,18 @@ def test_cli_errors(tmp_path, capsys):
         with pytest.raises(SystemExit):
             main(["train", "--agent", "skill-chaining", "--out", str(tmp_path / "x"), *argv])
         assert message in capsys.readouterr().err
+
+
+def test_discovery_log_registered_after_loading_gets_its_state(tmp_path):
+    first = trainer_for(2, seed=2, episodes=4)
+    log = DiscoveryLog()
+    log.register(first)
+    first.out_dir = tmp_path
+    first.train(max_agent_steps=1200)
+    path = first.save_checkpoint(tmp_path / "mid.pt")
+    resumed = trainer_for(2, seed=2, episodes=4)
+    load_checkpoint(path, resumed)  # before the hook exists, as the CLI does
+    again = DiscoveryLog()
+    again.register(resumed)
+    assert np.array_equal(again.n_options, log.n_options)
+    assert again.totals == log.totals
