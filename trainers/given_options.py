@@ -9,7 +9,8 @@ intra-option Q-learning; their initiation sets are used as given (no discovery),
 slot is made LEARNED (executable). The top level is SMDP Sarsa with the run's ``order``,
 ``alpha``, ``gamma`` and ``epsilon`` (paper values by default).
 
-The file's path is read from ``config.options`` (the ``--options`` flag).
+The file's path is read from ``config.options`` (the ``--options`` flag). Options from a
+skill-chaining run (``DIR/options.pt``) keep the no-overlap rule they were learned under.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 import torch
 
 from skillchain_torch.agents import HierarchicalAgent
+from skillchain_torch.discovery import exclude_overlap, overlap_exclusion
 from skillchain_torch.options import OptionBank, OptionStatus
 
 from .config import TrainConfig
@@ -28,8 +30,10 @@ def load_given_options(path, population: int, seed: int = 0,
                        device: torch.device | str | None = None,
                        agent: int | None = 0) -> OptionBank:  # fmt: skip
     """Saved agent ``agent``'s options from ``path`` replicated ``population`` times (or, with
-    ``agent=None``, saved agent ``p mod N`` for agent p), reseeded ``seed + p``, live slots set
-    to LEARNED."""
+    ``agent=None``, saved agent ``p mod N`` for agent p), reseeded ``seed + p``.
+
+    Options that were executable (LEARNING or LEARNED) become LEARNED; gestating ones, never
+    executed and with no initiation set yet, are dropped (their slots emptied)."""
     seeds = torch.arange(population, dtype=torch.int64) + int(seed)
     saved = OptionBank.load(path, device=device)
     if agent is not None and not 0 <= agent < saved.population:
@@ -38,6 +42,7 @@ def load_given_options(path, population: int, seed: int = 0,
     index = [agent] * population if agent is not None else [
         p % saved.population for p in range(population)]
     bank = saved.select_agents(index, seeds)
+    bank.free(bank.status == OptionStatus.GESTATING)
     bank.set_status(bank.live(), OptionStatus.LEARNED)
     return bank
 
@@ -62,3 +67,10 @@ class GivenOptionsAgent(HierarchicalAgent):
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device)
         self.config = cfg
+        # Options discovered by skill chaining keep out of their parents' and older siblings'
+        # sets, as they did when they were learned (a no-op for unrelated options).
+        self._exclusion = overlap_exclusion(self.bank)
+
+    def membership(self, obs):
+        return exclude_overlap(self.bank.classifier.contains(obs), self._exclusion,
+                               self.bank.classifier.trained)  # fmt: skip

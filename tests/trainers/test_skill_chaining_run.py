@@ -129,3 +129,26 @@ def test_discovery_log_registered_after_loading_gets_its_state(tmp_path):
     again.register(resumed)
     assert np.array_equal(again.n_options, log.n_options)
     assert again.totals == log.totals
+
+
+def test_given_options_drop_gestating_slots_and_keep_out_of_parents(tmp_path):
+    from skillchain_torch.trainers.given_options import GivenOptionsAgent
+
+    bank = OptionBank.build(1, 3, seed=0)
+    one = torch.tensor([True])
+    for kwargs, status in (({"target_event": 0}, OptionStatus.LEARNED),
+                           ({"parent": 0}, OptionStatus.GESTATING),
+                           ({"parent": 0}, OptionStatus.LEARNING)):  # fmt: skip
+        slot = bank.allocate(one, **kwargs)
+        bank.set_status(torch.nn.functional.one_hot(slot, 3).bool(), status)
+    with torch.no_grad():  # slot 0: x > 0.6; slot 2 untrained (everywhere)
+        bank.classifier.weight[0, 0, 1] = 1.0
+        bank.classifier.bias[0, 0] = -0.6
+        bank.classifier.trained[0, 0] = True
+    bank.save(tmp_path / "options.pt")
+    agent = GivenOptionsAgent(TrainConfig(agent="given-options", runs=2,
+                                          options=str(tmp_path / "options.pt")))  # fmt: skip
+    assert agent.bank.status[0].tolist() == [OptionStatus.LEARNED, OptionStatus.EMPTY,
+                                             OptionStatus.LEARNED]  # fmt: skip
+    inside = torch.tensor([[0.9, 0.5, 0.5, 0.5]] * 2, dtype=torch.float64)
+    assert agent.membership(inside)[0].tolist() == [True, True, False]  # the child keeps out
