@@ -54,8 +54,8 @@ class SkillChainingAgent(HierarchicalAgent):
     Args:
         bank: an :class:`OptionBank` (usually empty; :meth:`build` makes the paper's).
         events: the base target events, goal first (section 4.4).
-        gestation, max_branching, convergence_threshold, convergence_episodes, overlap: the
-            discovery rules (paper: 10, 3, 0.15, 2, on); see
+        gestation, max_branching, convergence_threshold, convergence_episodes, overlap,
+            wait_for_both_classes: the discovery rules (paper: 10, 3, 0.15, 2, on, off); see
             :class:`~skillchain_torch.discovery.SkillChaining`.
         **kwargs: the :class:`HierarchicalAgent` arguments (``order``, ``alpha``, ``gamma``,
             ``epsilon``, ``seed``, ``option_epsilon``, ``max_option_steps``, ...).
@@ -68,13 +68,14 @@ class SkillChainingAgent(HierarchicalAgent):
                  gestation: int = GESTATION_EPISODES, max_branching: int = MAX_BRANCHING,
                  convergence_threshold: float = CONVERGENCE_THRESHOLD,
                  convergence_episodes: int = CONVERGENCE_EPISODES, overlap: bool = True,
-                 **kwargs):  # fmt: skip
+                 wait_for_both_classes: bool = False, **kwargs):  # fmt: skip
         super().__init__(bank, events=events, **kwargs)
         self.discovery = SkillChaining(
             self.bank, self.events, gestation=gestation, max_branching=max_branching,
             convergence_threshold=convergence_threshold,
             convergence_episodes=convergence_episodes,
             max_option_steps=kwargs.get("max_option_steps", MAX_OPTION_STEPS), overlap=overlap,
+            wait_for_both_classes=wait_for_both_classes,
         )  # fmt: skip
         # Q(s, d) of the decision d in force at the current state s, valued when s was reached
         # (before that step's update): the samples of gestation.

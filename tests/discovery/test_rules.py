@@ -177,8 +177,9 @@ def test_q_value_initialised_to_the_largest_sampled_value():
 
 
 # ------------------------------------------------------------------ examples
-def test_success_gives_positive_examples():
-    agent = make_agent(events=(GoalEvent(), END))
+@pytest.mark.parametrize("wait", [False, True])
+def test_success_gives_positive_examples(wait):
+    agent = make_agent(events=(GoalEvent(), END), wait_for_both_classes=wait)
     k = add_option(agent, target_event=1)  # reach END
     prefer_option(agent, k)
     agent.begin(point(0.1))
@@ -189,7 +190,8 @@ def test_success_gives_positive_examples():
     clf = agent.bank.classifier
     assert clf.count[0, k] == 4 and clf.labels[0, k, :4].all()
     assert torch.equal(clf.examples[0, k, :4, 0], torch.tensor([0.1, 0.3, 0.5, 0.7], dtype=F64))
-    assert not clf.trained[0, k]  # one class only: the set stays true everywhere
+    assert clf.trained[0, k] != wait  # refitted after the new data, unless waiting
+    assert clf.contains_points(0, k, point(0.2)).item()  # successes alone: still inside
 
 
 def test_failure_gives_a_negative_start_and_drops_the_updates():
@@ -208,8 +210,9 @@ def test_failure_gives_a_negative_start_and_drops_the_updates():
     assert torch.equal(agent.bank.q_head.weight[0, k], start)  # the failed updates are gone
 
 
-def test_both_classes_fit_the_classifier():
-    agent = make_agent(events=(GoalEvent(), END), max_option_steps=3)
+@pytest.mark.parametrize("wait", [False, True])
+def test_both_classes_fit_the_classifier(wait):
+    agent = make_agent(events=(GoalEvent(), END), max_option_steps=3, wait_for_both_classes=wait)
     k = add_option(agent, target_event=1)
     prefer_option(agent, k)
     agent.begin(point(0.1))
@@ -218,8 +221,21 @@ def test_both_classes_fit_the_classifier():
     for x in (0.8, 0.9):  # a new execution from 0.4 ... 0.8 reaches END
         agent.observe(point(x), R)
     clf = agent.bank.classifier
-    assert clf.trained[0, k] and clf.sweeps_done[0, k] == 100
+    assert clf.trained[0, k] and clf.sweeps_done[0, k] == (100 if wait else 200)
     assert clf.logit(point(0.85))[0, k] > clf.logit(point(0.1))[0, k]
+
+
+def test_an_option_that_only_failed_leaves_the_repertoire():
+    for wait in (False, True):
+        agent = make_agent(events=(GoalEvent(), END), max_option_steps=2,
+                           wait_for_both_classes=wait)  # fmt: skip
+        k = add_option(agent, target_event=1)
+        prefer_option(agent, k)
+        agent.begin(point(0.1))
+        for x in (0.2, 0.3):  # fails after 2 steps
+            agent.observe(point(x), R)
+        available = agent.bank.available(point(0.5))[0, k].item()
+        assert available == wait  # the paper's fit empties the set; waiting keeps it
 
 
 # ------------------------------------------------------------------ convergence, chaining
