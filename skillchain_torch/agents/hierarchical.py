@@ -142,7 +142,7 @@ class HierarchicalAgent(nn.Module):
     # parameters, buffers and submodules) costs more than the tensor maths for these.
     _PLAIN = frozenset({"obs", "contains", "decision_phi", "decision", "option", "action",
                         "decision_return", "duration", "active", "option_code", "last_q",
-                        "last_phi", "q_decision", "_index", "_starts"})  # fmt: skip
+                        "last_phi", "_index"})  # fmt: skip
 
     def __setattr__(self, name, value):
         if name in self._PLAIN:

@@ -64,6 +64,8 @@ class SkillChainingAgent(HierarchicalAgent):
         discovery: the :class:`SkillChaining` state; its ``log`` holds the discovery events.
     """
 
+    _PLAIN = HierarchicalAgent._PLAIN | {"q_decision", "_starts"}
+
     def __init__(self, bank: OptionBank, events: Sequence[TerminationPredicate] = (GoalEvent(),),
                  gestation: int = GESTATION_EPISODES, max_branching: int = MAX_BRANCHING,
                  convergence_threshold: float = CONVERGENCE_THRESHOLD,
