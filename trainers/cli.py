@@ -319,11 +319,14 @@ def _write_discovery(trainer, discovery, out: Path) -> None:
     trainer.agent.bank.save(out / "options.pt")
     np.save(out / "n_options.npy", discovery.n_options)
     (out / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent), indent=1) + "\n")
-    # Figure 4b: the best greedy episode of the five agents that ended best.
+    # Figure 4b: the best greedy solution through options, among the eight agents that hold
+    # the most options (ties: the best last return).
     from .option_trajectory import best_greedy_trajectory, save_option_trajectory
 
-    best = np.argsort(-np.nan_to_num(trainer.returns[:, -1], nan=-np.inf))[:5]
-    run = best_greedy_trajectory(trainer.agent, trainer.config.map, agents=best.tolist())
+    held = trainer.agent.bank.live().sum(-1).cpu().numpy()
+    last = np.nan_to_num(trainer.returns[:, -1], nan=-np.inf)
+    order = sorted(range(len(held)), key=lambda p: (-held[p], -last[p]))[:8]
+    run = best_greedy_trajectory(trainer.agent, trainer.config.map, agents=order)
     save_option_trajectory(run, trainer.config.map, out / "option_trajectory.png")
 
 

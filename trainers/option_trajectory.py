@@ -92,10 +92,12 @@ def greedy_trajectory(agent, p: int, map_name: str, max_steps: int = 2000,
 
 
 def best_greedy_trajectory(agent, map_name: str, agents=None, max_steps: int = 2000) -> dict:
-    """The highest-return greedy episode among ``agents`` (default: all)."""
+    """The best greedy episode among ``agents`` (default: all) for a Figure 4b: one that reaches
+    the goal, preferably through options, with the highest return."""
     agents = range(agent.population) if agents is None else agents
     runs = [greedy_trajectory(agent, int(p), map_name, max_steps) for p in agents]
-    return max(runs, key=lambda run: (run["terminated"], run["return"]))
+    return max(runs, key=lambda run: (run["terminated"], bool((run["options"] >= 0).any()),
+                                      run["return"]))  # fmt: skip
 
 
 def plot_option_trajectory(run: dict, map_name: str, ax=None, title: str | None = None):
