@@ -101,10 +101,12 @@ def time_skill_chaining(population: int, agent_steps: int, threads: int,
     """Best rate (agent steps / s) of skill-chaining agents with options live.
 
     Every agent starts with the options one agent discovered in a real run
-    (``benchmarks/data/skill_chaining_options.pt``: learned, learning and gestating slots of a
-    12-slot bank) and discovery stays on, so the timed steps pay for everything options cost:
-    classifier and target evaluations, option policies, intra-option updates, examples, fits
-    and new options.
+    (``benchmarks/data/skill_chaining_options.pt``: agent 2 of the seed-0 run of
+    ``trainers/README.md``, the one with the most options: 9 of its 12 slots, 3 goal options, a
+    chain of depth 3, 2 learned) and discovery stays on, so the timed steps pay for everything
+    options cost: classifier and target evaluations, option policies, intra-option updates,
+    examples, a 100-sweep refit after every execution, and new options. The top level starts
+    at zero, so options are tried often: a heavy case.
     """
     from skillchain_torch.options import OptionBank
 
