@@ -18,7 +18,6 @@ from __future__ import annotations
 import torch
 
 from skillchain_torch.agents import HierarchicalAgent
-from skillchain_torch.discovery import exclude_overlap, overlap_exclusion
 from skillchain_torch.options import OptionBank, OptionStatus
 
 from .config import TrainConfig
@@ -65,12 +64,6 @@ class GivenOptionsAgent(HierarchicalAgent):
                                   agent=cfg.options_agent)
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
-                         scale_step_size=cfg.scale_step_size, device=device)
+                         scale_step_size=cfg.scale_step_size, device=device,
+                         overlap=True)  # as the options were learned (no-op if unrelated)
         self.config = cfg
-        # Options discovered by skill chaining keep out of their parents' and older siblings'
-        # sets, as they did when they were learned (a no-op for unrelated options).
-        self._exclusion = overlap_exclusion(self.bank)
-
-    def membership(self, obs):
-        return exclude_overlap(self.bank.classifier.contains(obs), self._exclusion,
-                               self.bank.classifier.trained)  # fmt: skip

@@ -24,7 +24,6 @@ import numpy as np
 import torch
 
 from skillchain_torch.agents import HierarchicalAgent
-from skillchain_torch.discovery import exclude_overlap, overlap_exclusion
 from skillchain_torch.envs.pinball import PinballEnv, load_map
 
 __all__ = ["greedy_trajectory", "best_greedy_trajectory", "plot_option_trajectory",
@@ -35,26 +34,16 @@ OPTION_COLORS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple",
                  "tab:pink", "tab:olive", "tab:brown", "gold", "lime", "navy")  # fmt: skip
 
 
-class _FrozenOptions(HierarchicalAgent):
-    """A replayed agent: its options as they are (no discovery, no refits), with the
-    no-overlap rule they were learned under."""
-
-    def __init__(self, bank, **kwargs):
-        super().__init__(bank, **kwargs)
-        self._exclusion = overlap_exclusion(self.bank)
-
-    def membership(self, obs):
-        return exclude_overlap(self.bank.classifier.contains(obs), self._exclusion,
-                               self.bank.classifier.trained)  # fmt: skip
-
-
 def _single_agent(agent, p: int) -> HierarchicalAgent:
     """A frozen, greedy copy of agent ``p`` of a population (P = 1)."""
     if not isinstance(agent, HierarchicalAgent):
         raise TypeError("greedy_trajectory needs an agent with options (HierarchicalAgent)")
-    single = _FrozenOptions(agent.bank.select_agents([p]), order=agent.order, alpha=0.0,
-                            gamma=agent.gamma, epsilon=0.0, option_epsilon=0.0,
-                            events=agent.events, max_option_steps=agent.max_option_steps)
+    # A plain HierarchicalAgent: the options as they are (no discovery, no refits), with the
+    # no-overlap rule they were learned under.
+    single = HierarchicalAgent(agent.bank.select_agents([p]), order=agent.order, alpha=0.0,
+                               gamma=agent.gamma, epsilon=0.0, option_epsilon=0.0,
+                               events=agent.events, max_option_steps=agent.max_option_steps,
+                               overlap=True)
     with torch.no_grad():
         single.q_head.weight.copy_(agent.q_head.weight[p : p + 1])
     for name in ("alpha", "lr"):  # frozen: no intra-option learning on the way

@@ -51,6 +51,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate, discount
@@ -82,6 +83,9 @@ class HierarchicalAgent(nn.Module):
         max_option_steps: an option is interrupted after this many steps (paper: 250).
         completion_reward: ``C`` of :class:`IntraOptionQLearning`.
         scale_step_size: per-feature top-level step sizes (Konidaris et al. 2011).
+        overlap: apply skill chaining's no-overlap rule to memberships (an option stays out
+            of its parent's and older siblings' sets), for options discovered under it; the
+            bank's tree must not change afterwards (discovery itself uses ``SkillChaining``).
         device: torch device (default: the bank's).
     """
 
@@ -98,6 +102,7 @@ class HierarchicalAgent(nn.Module):
         max_option_steps: int = MAX_OPTION_STEPS,
         completion_reward: float | Tensor = 10_000.0,
         scale_step_size: bool = False,
+        overlap: bool = False,
         device: torch.device | str | None = None,
     ):
         super().__init__()
@@ -106,6 +111,7 @@ class HierarchicalAgent(nn.Module):
         self.population, self.slots = bank.population, bank.slots
         self.num_decisions = NUM_PRIMITIVES + self.slots
         self.order = int(order)
+        self._exclusion = overlap_exclusion(self.bank) if overlap else None
         self.epsilon, self.option_epsilon = float(epsilon), float(option_epsilon)
         self.gamma = float(gamma)
         self.max_option_steps = int(max_option_steps)
@@ -161,7 +167,10 @@ class HierarchicalAgent(nn.Module):
     def membership(self, obs: Tensor) -> Tensor:
         """``[P, K]``: which initiation sets hold ``obs [P, 4]`` (one classifier evaluation per
         visited state; skill chaining narrows it by its overlap rule)."""
-        return self.bank.classifier.contains(obs)
+        contains = self.bank.classifier.contains(obs)
+        if self._exclusion is None:
+            return contains
+        return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
 
     def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
         """``[P, K]``: each live option's termination predicate (target event) at ``s'``."""

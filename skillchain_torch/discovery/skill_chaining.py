@@ -271,10 +271,7 @@ class SkillChaining:
         if bool(counted.any()):
             change = classifier.weight_change(self.episode_weights)
             converged = self.convergence.update(change, counted)
-            stored = torch.arange(classifier.capacity, device=rows.device) < classifier.count[
-                ..., None]
-            has_positive = (classifier.labels & stored).any(-1)
-            learned = converged & has_positive
+            learned = converged & classifier.stored_classes()[0]  # needs a positive example
             if bool(learned.any()):
                 bank.set_status(learned, OptionStatus.LEARNED)
                 classifier.constrain(learned)  # distance 0.1 from a positive example

@@ -282,11 +282,14 @@ class InitiationClassifier(nn.Module):
         self.dirty |= touched
         return touched
 
+    def stored_classes(self) -> tuple[Tensor, Tensor]:
+        """``(positive, negative)`` ``[P, K]``: the slot stores an example of that class."""
+        stored = torch.arange(self.capacity, device=self.labels.device) < self.count[..., None]
+        return (self.labels & stored).any(-1), (~self.labels & stored).any(-1)
+
     def has_both_classes(self) -> Tensor:
         """``[P, K]``: the slot stores at least one positive and one negative example."""
-        stored = torch.arange(self.capacity, device=self.labels.device) < self.count[..., None]
-        positive = (self.labels & stored).any(-1)
-        negative = (~self.labels & stored).any(-1)
+        positive, negative = self.stored_classes()
         return positive & negative
 
     # ----------------------------------------------------------------------------- fitting
