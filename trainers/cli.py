@@ -59,6 +59,8 @@ CONFIG_OPTIONS = (
     "options",
     "options_agent",
     "slots",
+    "initiation_bias",
+    "initiation_centered",
 )
 
 
@@ -128,6 +130,20 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="option slots per agent for --agent skill-chaining (default 12)",
+    )
+    train.add_argument(
+        "--initiation-bias",
+        type=float,
+        default=None,
+        help="intercept new initiation classifiers start from (default 0: true everywhere "
+        "until the first fit, which starts from zero)",
+    )
+    train.add_argument(
+        "--initiation-centered",
+        action="store_const",
+        const=True,
+        default=None,
+        help="initiation classifiers on features of 2s-1 instead of s",
     )
     train.add_argument(
         "--checkpoint-every",

@@ -61,6 +61,9 @@ class TrainConfig:
             each agent given the options one skill-chaining run discovered).
         slots: K, option slots per agent of ``--agent skill-chaining`` (when all are used the
             agent creates no more options).
+        initiation_bias, initiation_centered: the initiation classifiers' ``initial_bias``
+            and ``centered`` (see :class:`~skillchain_torch.options.InitiationClassifier`);
+            the defaults, 0 and False, are the reading the first results used.
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -82,6 +85,8 @@ class TrainConfig:
     options: str | None = None
     options_agent: int | None = 0
     slots: int = 12
+    initiation_bias: float = 0.0
+    initiation_centered: bool = False
 
     def resolved(self) -> TrainConfig:
         """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``)."""
@@ -108,6 +113,8 @@ class TrainConfig:
             ("gamma", self.gamma, 0.0 <= self.gamma <= 1.0, "in [0, 1]"),
             ("checkpoint_every", self.checkpoint_every, self.checkpoint_every >= 0, ">= 0"),
             ("slots", self.slots, self.slots >= 1, ">= 1"),
+            ("initiation_bias", self.initiation_bias, math.isfinite(self.initiation_bias),
+             "finite"),
         ]
         if self.options_agent is not None:
             checks.append(("options_agent", self.options_agent, self.options_agent >= 0, ">= 0"))

@@ -36,7 +36,9 @@ class SkillChainingRunAgent(SkillChainingAgent):
         from skillchain_torch.options import OptionBank
 
         # Class-balanced initiation-set fits: see SkillChainingAgent.build.
-        bank = OptionBank.build(cfg.runs, cfg.slots, seed=cfg.seed, device=device, balanced=True)
+        bank = OptionBank.build(cfg.runs, cfg.slots, seed=cfg.seed, device=device, balanced=True,
+                                initial_bias=cfg.initiation_bias,
+                                centered=cfg.initiation_centered)  # fmt: skip
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device)

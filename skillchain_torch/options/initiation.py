@@ -69,6 +69,14 @@ class InitiationClassifier(nn.Module):
             a successful execution into up to 250 positive examples and a failed one into a
             single negative, so unweighted the positives outvote the failures and the set
             stays wide where the option fails (see ``SkillChainingAgent``).
+        initial_bias: the intercept a slot starts (and restarts) from. "Initialised to be true
+            everywhere" is read two ways: 0 (default) with an untrained slot counting as true
+            everywhere, so the first fit starts from zero and a lone failure empties the set;
+            or a positive value, so the set starts true through its weights and failures
+            carve regions out of it.
+        centered: features of ``2 s - 1`` (inputs in [-1, 1]) instead of ``s`` (in [0, 1]).
+            With all-positive features a negative example lowers the logit about as much
+            everywhere; centred, features far away partly oppose it, so they lose less.
         seed: int (agent p uses ``seed + p``) or ``LongTensor [P]``: the reservoir's draws are a
             hash of (agent seed, slot, slot generation, example index), independent of P.
 
@@ -102,6 +110,8 @@ class InitiationClassifier(nn.Module):
         distance_dims: tuple[int, ...] | list[int] | None = None,
         replacement: str = "reservoir",
         balanced: bool = False,
+        initial_bias: float = 0.0,
+        centered: bool = False,
         seed: int | Tensor = 0,
         dtype: torch.dtype | str = torch.float64,
         device: torch.device | str | None = None,
@@ -123,15 +133,18 @@ class InitiationClassifier(nn.Module):
         self.config: dict[str, Any] = dict(
             population=population, slots=slots, degree=degree, lr=self.lr, sweeps=self.sweeps,
             capacity=capacity, distance=self.distance, distance_dims=list(dims),
-            replacement=replacement, balanced=self.balanced, dtype=dtype_name(dtype),
+            replacement=replacement, balanced=self.balanced, initial_bias=float(initial_bias),
+            centered=bool(centered), dtype=dtype_name(dtype),
         )  # fmt: skip
+        self.initial_bias, self.centered = float(initial_bias), bool(centered)
         self.features = PolynomialFeatures(OBS_DIM, degree, dtype=dtype).to(device)
         self.num_features = self.features.num_features
         pk = (population, slots)
         zeros = torch.zeros
         self.weight = nn.Parameter(zeros(*pk, self.num_features, dtype=dtype, device=device),
                                    requires_grad=False)  # fmt: skip
-        self.bias = nn.Parameter(zeros(pk, dtype=dtype, device=device), requires_grad=False)
+        self.bias = nn.Parameter(torch.full(pk, self.initial_bias, dtype=dtype, device=device),
+                                 requires_grad=False)  # fmt: skip
         self.register_buffer("examples", zeros(*pk, capacity, OBS_DIM, dtype=dtype, device=device))
         self.register_buffer("labels", zeros(*pk, capacity, dtype=torch.bool, device=device))
         for name in ("count", "seen", "generation", "sweeps_done"):
@@ -146,9 +159,13 @@ class InitiationClassifier(nn.Module):
             raise ValueError(f"obs must be [P={self.population}, 4], got {tuple(obs.shape)}")
         return obs.to(device=self.weight.device, dtype=self.weight.dtype)
 
+    def phi(self, obs: Tensor) -> Tensor:
+        """The classifier's features of observations ``[..., 4]`` (centred if ``centered``)."""
+        return self.features(2.0 * obs - 1.0 if self.centered else obs)
+
     def logit(self, obs: Tensor) -> Tensor:
         """``weight . phi(s) + bias`` for every slot: ``obs [P, 4] -> [P, K]``."""
-        phi = self.features(self._check_obs(obs))
+        phi = self.phi(self._check_obs(obs))
         return rowwise_dot(self.weight, phi[:, None, :]) + self.bias
 
     def probability(self, obs: Tensor) -> Tensor:
@@ -211,7 +228,7 @@ class InitiationClassifier(nn.Module):
             if not trained:
                 out.append(torch.ones(chunk.shape[0], dtype=torch.bool, device=w.device))
                 continue
-            member = (rowwise_dot(self.features(chunk), w[None, :]) + b) > 0
+            member = (rowwise_dot(self.phi(chunk), w[None, :]) + b) > 0
             if constrained:
                 squared = None
                 for j in self.distance_dims:
@@ -302,7 +319,7 @@ class InitiationClassifier(nn.Module):
         where = mask.nonzero()
         if where.shape[0] > 0:
             pi, ki = where[:, 0], where[:, 1]
-            x = self.features(self.examples[pi, ki])  # [M, C, F]
+            x = self.phi(self.examples[pi, ki])  # [M, C, F]
             xt = x.transpose(1, 2).contiguous()  # [M, F, C] to reduce over the examples
             y = self.labels[pi, ki].to(x.dtype)
             stored = torch.arange(self.capacity, device=x.device) < self.count[pi, ki][:, None]
@@ -338,11 +355,11 @@ class InitiationClassifier(nn.Module):
 
     @torch.no_grad()
     def reset_slots(self, mask: Tensor) -> None:
-        """Forget the slots in ``mask [P, K]``: no data, zero weights, true everywhere."""
+        """Forget the slots in ``mask [P, K]``: no data, zero weights and the initial bias."""
         mask = check_slot_mask(mask, self.population, self.slots).to(self.seeds.device)
         pi, ki = mask.nonzero().unbind(-1)  # index the few slots, not a mask over the stores
         self.weight[pi, ki] = 0.0
-        self.bias[pi, ki] = 0.0
+        self.bias[pi, ki] = self.initial_bias
         self.examples[pi, ki] = 0.0
         self.labels[pi, ki] = False
         for name in ("count", "seen", "sweeps_done"):

@@ -249,3 +249,49 @@ def test_balanced_fit_lets_one_failure_outvote_many_successes():
         assert clf.config["balanced"] is balanced
     assert logits[False][0] > 0  # plain: the failure's start stays inside the set
     assert logits[True][0] < 0 < logits[True][1]  # balanced: out, the successes stay in
+
+
+def _grid(n: int = 6) -> torch.Tensor:
+    axis = (torch.arange(n, dtype=F64) + 0.5) / n
+    return torch.cartesian_prod(axis, axis, axis, axis)
+
+
+@pytest.mark.parametrize("centered", [False, True])
+def test_initial_bias_lets_a_failure_carve_out_instead_of_emptying(centered):
+    # One failed start state: from zero the fit says no everywhere (all features of s in
+    # [0, 1] are >= 0); from a large intercept the failure removes only part of the set.
+    start = torch.tensor([[0.2, 0.9, 0.5, 0.5]], dtype=F64)
+    share = {}
+    for bias in (0.0, 16.0):
+        clf = InitiationClassifier(1, 1, initial_bias=bias, centered=centered)
+        assert clf.logit(start).item() == bias
+        clf.add_examples(0, 0, start, torch.zeros(1))
+        clf.fit()
+        assert clf.logit(start).item() < 0
+        share[bias] = clf.contains_points(0, 0, _grid()).double().mean().item()
+    assert share[0.0] == 0.0
+    assert 0.2 < share[16.0] < 1.0
+
+
+def test_centered_features_localise_a_negative():
+    # Centred, the far point's features partly oppose the failure's, so it loses less.
+    start = torch.tensor([[0.2, 0.9, 0.5, 0.5]], dtype=F64)
+    far = torch.tensor([[0.9, 0.1, 0.5, 0.5]], dtype=F64)
+    ratio = {}
+    for centered in (False, True):
+        clf = InitiationClassifier(1, 1, centered=centered, sweeps=1)
+        clf.add_examples(0, 0, start, torch.zeros(1))
+        clf.fit()
+        ratio[centered] = clf.logit(far).item() / clf.logit(start).item()
+    assert 0 < ratio[True] < 0.8 * ratio[False]
+
+
+def test_reset_restores_the_initial_bias_and_config_round_trips():
+    clf = InitiationClassifier(2, 2, initial_bias=3.0, centered=True)
+    clf.add_examples(1, 0, rand((4, 4), 0), torch.zeros(4))
+    clf.fit()
+    assert clf.bias[1, 0].item() != 3.0
+    clf.reset_slot(1, 0)
+    assert clf.bias.tolist() == [[3.0, 3.0], [3.0, 3.0]]
+    copy = clf.select_agents([1, 0])
+    assert copy.config["initial_bias"] == 3.0 and copy.config["centered"] is True
