@@ -84,10 +84,11 @@ class InitiationClassifier(nn.Module):
     ``P(s in I_k) = sigmoid(weight . phi(s) + bias)`` and membership is ``logit > 0``. They are
     trained in closed form (no autograd): a sweep is one full-batch gradient step on the mean
     log-loss over the slot's stored examples, ``w -= lr * mean((sigmoid(z) - y) * phi)``, so a
-    fit costs ``sweeps * C * F`` per slot whatever the amount of data seen (bounded time;
-    about 0.4 s for 100 slots with full stores of 500 on one CPU thread). The features include
-    the constant 1, so its weight and ``bias`` both act as the intercept, as ``nn.Linear`` over
-    ``PolynomialFeatures`` would. With a cap the distance constraint anchors on the *stored*
+    fit costs at most ``sweeps * C * F`` per slot whatever the amount of data seen (bounded
+    time; about 0.4 s for 100 slots with full stores of 500 on one CPU thread), less for slots
+    holding few examples (:meth:`fit_length`). The features include the constant 1, so its
+    weight and ``bias`` both act as the intercept, as ``nn.Linear`` over ``PolynomialFeatures``
+    would. With a cap the distance constraint anchors on the *stored*
     positives (a uniform subsample under ``"reservoir"``), not on every positive ever seen.
     All maths is elementwise or :mod:`~skillchain_torch.invariant` reductions, so agent p's
     numbers are bit-identical alone or in a population.
@@ -313,40 +314,62 @@ class InitiationClassifier(nn.Module):
     @torch.no_grad()
     def fit(self, mask: Tensor | None = None) -> Tensor:
         """Run ``sweeps`` gradient steps on each slot in ``mask`` (default: ``dirty``) that holds
-        data; others are untouched. Returns the ``[P, K]`` mask of slots fitted."""
+        data; others are untouched. Returns the ``[P, K]`` mask of slots fitted.
+
+        A slot's sweeps run over its first :meth:`fit_length` stored examples (the rest are
+        empty), so a slot with a few examples costs a few, and the length depends on the slot's
+        own count only: its numbers are the same whatever else is fitted with it.
+        """
         mask = self.dirty if mask is None else check_slot_mask(mask, self.population, self.slots)
         mask = mask.to(self.weight.device) & (self.count > 0)
         where = mask.nonzero()
         if where.shape[0] > 0:
             pi, ki = where[:, 0], where[:, 1]
-            x = self.phi(self.examples[pi, ki])  # [M, C, F]
-            xt = x.transpose(1, 2).contiguous()  # [M, F, C] to reduce over the examples
-            y = self.labels[pi, ki].to(x.dtype)
-            stored = torch.arange(self.capacity, device=x.device) < self.count[pi, ki][:, None]
-            n = self.count[pi, ki].to(x.dtype)
-            if self.balanced:  # each example weighs 1 / (2 * its class's count)
-                positives = rowwise_sum(torch.where(stored, y, torch.zeros_like(y)))
-                negatives = n - positives
-                share = torch.where(y > 0, 0.5 / positives.clamp(min=1.0)[:, None],
-                                    0.5 / negatives.clamp(min=1.0)[:, None])  # fmt: skip
-            w, b = self.weight[pi, ki], self.bias[pi, ki]
-            zero = torch.zeros((), dtype=x.dtype, device=x.device)
-            for _ in range(self.sweeps):
-                z = rowwise_dot(x, w[:, None, :]) + b[:, None]
-                err = torch.where(stored, 1.0 / (1.0 + torch.exp(-z)) - y, zero)  # [M, C]
-                if self.balanced:
-                    err = err * share
-                    w = w - self.lr * rowwise_dot(xt, err[:, None, :])
-                    b = b - self.lr * rowwise_sum(err)
-                else:  # the plain mean, in the order the unweighted fit always used
-                    w = w - self.lr * (rowwise_dot(xt, err[:, None, :]) / n[:, None])
-                    b = b - self.lr * (rowwise_sum(err) / n)
-            self.weight[pi, ki] = w
-            self.bias[pi, ki] = b
+            lengths = self.fit_length(self.count[pi, ki])
+            for length in torch.unique(lengths).tolist():
+                group = lengths == length
+                self._fit_slots(pi[group], ki[group], int(length))
             self.sweeps_done[pi, ki] += self.sweeps
             self.trained[pi, ki] = True
         self.dirty &= ~mask
         return mask
+
+    def fit_length(self, count: Tensor) -> Tensor:
+        """Examples a fit runs over for slots holding ``count``: the next power of two of at
+        least 8, at most the capacity."""
+        length = torch.full_like(count, 8)
+        while bool((length < count).any()):
+            length = torch.where(length < count, 2 * length, length)
+        return length.clamp(max=self.capacity)
+
+    def _fit_slots(self, pi: Tensor, ki: Tensor, length: int) -> None:
+        """``sweeps`` full-batch gradient steps on slots ``(pi, ki)`` over ``length`` examples."""
+        x = self.phi(self.examples[pi, ki, :length])  # [M, L, F]
+        xt = x.transpose(1, 2).contiguous()  # [M, F, L] to reduce over the examples
+        y = self.labels[pi, ki, :length].to(x.dtype)
+        count = self.count[pi, ki]
+        stored = torch.arange(length, device=x.device) < count[:, None]
+        n = count.to(x.dtype)
+        zero = torch.zeros((), dtype=x.dtype, device=x.device)
+        if self.balanced:  # each example weighs 1 / (2 * its class's count), empty ones 0
+            positives = rowwise_sum(torch.where(stored, y, zero))
+            negatives = n - positives
+            share = torch.where(y > 0, 0.5 / positives.clamp(min=1.0)[:, None],
+                                0.5 / negatives.clamp(min=1.0)[:, None])  # fmt: skip
+            share = torch.where(stored, share, zero)
+        w, b = self.weight[pi, ki], self.bias[pi, ki]
+        for _ in range(self.sweeps):
+            z = rowwise_dot(x, w[:, None, :]) + b[:, None]
+            if self.balanced:
+                err = (1.0 / (1.0 + torch.exp(-z)) - y) * share  # [M, L]
+                w = w - self.lr * rowwise_dot(xt, err[:, None, :])
+                b = b - self.lr * rowwise_sum(err)
+            else:  # the plain mean
+                err = torch.where(stored, 1.0 / (1.0 + torch.exp(-z)) - y, zero)
+                w = w - self.lr * (rowwise_dot(xt, err[:, None, :]) / n[:, None])
+                b = b - self.lr * (rowwise_sum(err) / n)
+        self.weight[pi, ki] = w
+        self.bias[pi, ki] = b
 
     # ----------------------------------------------------------------------------- slots
     def constrain(self, mask: Tensor) -> None:

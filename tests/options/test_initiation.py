@@ -295,3 +295,19 @@ def test_reset_restores_the_initial_bias_and_config_round_trips():
     assert clf.bias.tolist() == [[3.0, 3.0], [3.0, 3.0]]
     copy = clf.select_agents([1, 0])
     assert copy.config["initial_bias"] == 3.0 and copy.config["centered"] is True
+
+
+def test_fit_runs_over_a_length_set_by_the_slots_own_count():
+    clf = InitiationClassifier(1, 1, capacity=500)
+    counts = torch.tensor([1, 8, 9, 100, 256, 257, 500])
+    assert clf.fit_length(counts).tolist() == [8, 8, 16, 128, 256, 500, 500]
+    # A few-example slot fitted beside a full one equals it fitted alone, bit for bit.
+    together = InitiationClassifier(2, 2, capacity=300, balanced=True)
+    alone = InitiationClassifier(1, 1, capacity=300, balanced=True)
+    few, many = rand((3, 4), 1), rand((300, 4), 2)
+    together.add_examples(0, 1, few, torch.tensor([1.0, 0.0, 1.0]))
+    together.add_examples(1, 0, many, many[:, 0] < 0.5)
+    alone.add_examples(0, 0, few, torch.tensor([1.0, 0.0, 1.0]))
+    assert together.fit().sum().item() == 2 and alone.fit().sum().item() == 1
+    assert torch.equal(together.weight[0, 1], alone.weight[0, 0])
+    assert torch.equal(together.bias[0, 1], alone.bias[0, 0])
