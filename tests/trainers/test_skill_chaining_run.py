@@ -110,7 +110,8 @@ def test_cli_writes_discovery_outputs_loadable_as_given_options(tmp_path, capsys
 
 def test_cli_errors(tmp_path, capsys):
     for argv, message in ((["--slots", "0"], "slots must be >= 1, got 0"),
-                          (["--options-agent", "x"], "expected an agent index or 'each'")):
+                          (["--options-agent", "x"], "expected an agent index or 'each'"),
+                          (["--initiation-bias", "nan"], "initiation_bias must be finite")):
         with pytest.raises(SystemExit):
             main(["train", "--agent", "skill-chaining", "--out", str(tmp_path / "x"), *argv])
         assert message in capsys.readouterr().err
@@ -152,3 +153,14 @@ def test_given_options_drop_gestating_slots_and_keep_out_of_parents(tmp_path):
                                              OptionStatus.LEARNED]  # fmt: skip
     inside = torch.tensor([[0.9, 0.5, 0.5, 0.5]] * 2, dtype=torch.float64)
     assert agent.membership(inside)[0].tolist() == [True, True, False]  # the child keeps out
+
+
+def test_initiation_reading_reaches_the_classifiers():
+    from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+
+    config = TrainConfig(runs=2, initiation_bias=2.5, initiation_centered=True, **BOX)
+    classifier = SkillChainingRunAgent(config).bank.classifier
+    assert classifier.config["initial_bias"] == 2.5 and classifier.config["centered"] is True
+    assert classifier.bias.eq(2.5).all()
+    default = SkillChainingRunAgent(TrainConfig(runs=1, **BOX)).bank.classifier
+    assert default.config["initial_bias"] == 0.0 and default.config["centered"] is False
