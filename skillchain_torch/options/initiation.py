@@ -343,33 +343,38 @@ class InitiationClassifier(nn.Module):
         return length.clamp(max=self.capacity)
 
     def _fit_slots(self, pi: Tensor, ki: Tensor, length: int) -> None:
-        """``sweeps`` full-batch gradient steps on slots ``(pi, ki)`` over ``length`` examples."""
+        """``sweeps`` full-batch gradient steps on slots ``(pi, ki)`` over ``length`` examples.
+
+        Written for few tensor operations per sweep (nine): the bias rides as a last weight
+        on a constant feature, each example's step ``lr * its weight in the mean`` (0 for
+        empty places) is folded in once, and the loop carries the negated parameters ``v``
+        so that ``exp(x . v)`` is ``exp(-z)``: a sweep is ``g = s / (1 + exp(x . v)) - s y``
+        (``= lr * weight * (sigmoid(z) - y)``), ``v += sum_l x_l g_l``.
+        """
         x = self.phi(self.examples[pi, ki, :length])  # [M, L, F]
-        xt = x.transpose(1, 2).contiguous()  # [M, F, L] to reduce over the examples
+        x = torch.cat([x, torch.ones_like(x[..., :1])], dim=-1)  # [M, L, F + 1]
+        xt = x.transpose(1, 2).contiguous()  # [M, F + 1, L] to reduce over the examples
         y = self.labels[pi, ki, :length].to(x.dtype)
         count = self.count[pi, ki]
         stored = torch.arange(length, device=x.device) < count[:, None]
-        n = count.to(x.dtype)
         zero = torch.zeros((), dtype=x.dtype, device=x.device)
-        if self.balanced:  # each example weighs 1 / (2 * its class's count), empty ones 0
+        if self.balanced:  # each example weighs 1 / (2 * its class's count)
             positives = rowwise_sum(torch.where(stored, y, zero))
-            negatives = n - positives
-            share = torch.where(y > 0, 0.5 / positives.clamp(min=1.0)[:, None],
-                                0.5 / negatives.clamp(min=1.0)[:, None])  # fmt: skip
-            share = torch.where(stored, share, zero)
-        w, b = self.weight[pi, ki], self.bias[pi, ki]
+            negatives = count.to(x.dtype) - positives
+            weight = torch.where(y > 0, 0.5 / positives.clamp(min=1.0)[:, None],
+                                 0.5 / negatives.clamp(min=1.0)[:, None])  # fmt: skip
+        else:  # the plain mean
+            weight = (1.0 / count.to(x.dtype))[:, None].expand_as(y)
+        step = torch.where(stored, self.lr * weight, zero)  # [M, L]
+        step_y = step * y
+        v = -torch.cat([self.weight[pi, ki], self.bias[pi, ki, None]], dim=-1)  # [M, F + 1]
         for _ in range(self.sweeps):
-            z = rowwise_dot(x, w[:, None, :]) + b[:, None]
-            if self.balanced:
-                err = (1.0 / (1.0 + torch.exp(-z)) - y) * share  # [M, L]
-                w = w - self.lr * rowwise_dot(xt, err[:, None, :])
-                b = b - self.lr * rowwise_sum(err)
-            else:  # the plain mean
-                err = torch.where(stored, 1.0 / (1.0 + torch.exp(-z)) - y, zero)
-                w = w - self.lr * (rowwise_dot(xt, err[:, None, :]) / n[:, None])
-                b = b - self.lr * (rowwise_sum(err) / n)
-        self.weight[pi, ki] = w
-        self.bias[pi, ki] = b
+            g = step / (1.0 + torch.exp((x * v[:, None, :]).sum(-1))) - step_y  # [M, L]
+            v = v + (xt * g[:, None, :]).sum(-1)
+        # Each sum above reduces a contiguous last dim with more than one row, so every row is
+        # summed alone in a fixed order (see skillchain_torch.invariant).
+        self.weight[pi, ki] = -v[:, :-1]
+        self.bias[pi, ki] = -v[:, -1]
 
     # ----------------------------------------------------------------------------- slots
     def constrain(self, mask: Tensor) -> None:
