@@ -185,7 +185,12 @@ class HierarchicalAgent(nn.Module):
         decisions are meaningless. ``phi`` and ``Q(obs, .)`` stay in ``last_phi`` and
         ``last_q`` for subclasses (``last_q`` valid on ``rows``)."""
         phi = self.features(obs)
-        q = self.q_head(phi) if rows is None else self.q_head.forward_rows(phi, rows)
+        # Decisions past the last slot any agent uses are unavailable everywhere (an empty
+        # slot never is) and need no value: early in skill chaining most slots are empty.
+        used = self.bank.live().any(0).nonzero()
+        decisions = NUM_PRIMITIVES + (int(used[-1, 0]) + 1 if used.shape[0] > 0 else 0)
+        rows = torch.ones_like(self.active) if rows is None else rows
+        q = self.q_head.forward_rows(phi, rows, decisions)
         self.last_phi, self.last_q = phi, q
         return phi, epsilon_greedy(q, self.top_level_available(obs, contains), self.epsilon,
                                    uniforms, check=False)  # primitives are always available

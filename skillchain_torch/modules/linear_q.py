@@ -67,13 +67,20 @@ class LinearQHead(nn.Module):
         self._check_phi(phi)
         return rowwise_dot(self.weight, phi[:, None, :].to(self.weight.dtype))
 
-    def forward_rows(self, phi: Tensor, rows: Tensor) -> Tensor:
-        """``forward`` for the agents in ``rows [P]`` only (bit-equal there); other rows 0."""
+    def forward_rows(self, phi: Tensor, rows: Tensor, decisions: int | None = None) -> Tensor:
+        """``forward`` for the agents in ``rows [P]`` only (bit-equal there); other rows 0.
+
+        ``decisions``: value only the first this many decisions (the rest read 0), e.g. the
+        primitives and the option slots in use; each value is the same row sum either way.
+        """
         self._check_phi(phi)
         index = rows.nonzero()[:, 0]
         q = torch.zeros(self.population, self.num_decisions, dtype=self.weight.dtype,
                         device=self.weight.device)  # fmt: skip
-        q[index] = rowwise_dot(self.weight[index], phi[index][:, None, :].to(self.weight.dtype))
+        d = self.num_decisions if decisions is None else max(1, min(int(decisions),
+                                                                    self.num_decisions))
+        weight = self.weight[index, :d] if d < self.num_decisions else self.weight[index]
+        q[index, :d] = rowwise_dot(weight, phi[index][:, None, :].to(self.weight.dtype))
         return q
 
     def q_value(self, phi: Tensor, decision: Tensor) -> Tensor:

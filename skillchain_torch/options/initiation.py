@@ -130,7 +130,6 @@ class InitiationClassifier(nn.Module):
         self.lr, self.sweeps, self.distance = float(lr), int(sweeps), float(distance)
         self.distance_dims, self.replacement = dims, replacement
         self.balanced = bool(balanced)
-        self._squared_distance = self.distance * self.distance  # no sqrt per stored example
         self.config: dict[str, Any] = dict(
             population=population, slots=slots, degree=degree, lr=self.lr, sweeps=self.sweeps,
             capacity=capacity, distance=self.distance, distance_dims=list(dims),
@@ -173,11 +172,24 @@ class InitiationClassifier(nn.Module):
         """``sigmoid(logit)`` written as ``1 / (1 + exp(-z))`` (layout-invariant)."""
         return 1.0 / (1.0 + torch.exp(-self.logit(obs)))
 
+    def _within(self, points: Tensor, examples: Tensor) -> Tensor:
+        """``|point - example| <= distance`` (in ``distance_dims``) for every pair:
+        ``points [..., N, 4]``, ``examples [..., M, 4]`` -> ``[..., N, M]``.
+
+        ``cdist`` without the matrix-product shortcut computes each pair on its own (one
+        kernel instead of a dozen elementwise operations, and the same bits whatever the batch
+        around it, which ``tests/options/test_initiation.py`` checks).
+        """
+        if len(self.distance_dims) < OBS_DIM:
+            dims = list(self.distance_dims)
+            points, examples = points[..., dims], examples[..., dims]
+        distance = torch.cdist(points, examples, compute_mode="donot_use_mm_for_euclid_dist")
+        return distance <= self.distance
+
     def near_positive(self, obs: Tensor, mask: Tensor | None = None) -> Tensor:
         """``[P, K]``: within ``distance`` of at least one stored positive example.
 
-        Only the slots in ``mask [P, K]`` (default all) are checked; others read False. The
-        squared distance is compared with ``distance ** 2`` (no square root per example).
+        Only the slots in ``mask [P, K]`` (default all) are checked; others read False.
         """
         obs = self._check_obs(obs)
         mask = torch.ones_like(self.trained) if mask is None else mask
@@ -189,12 +201,10 @@ class InitiationClassifier(nn.Module):
             pi, ki = mask.nonzero().unbind(-1)
             examples, count, labels = self.examples[pi, ki], self.count[pi, ki], self.labels[pi, ki]
             point = obs[pi]
-        squared = None
-        for j in self.distance_dims:  # fixed order, elementwise only: layout-invariant
-            diff = examples[..., j] - point[..., j, None]
-            squared = diff * diff if squared is None else squared + diff * diff
         stored = torch.arange(self.capacity, device=obs.device) < count[..., None]
-        near = ((squared <= self._squared_distance) & stored & labels).any(-1)
+        within = self._within(point.reshape(-1, 1, OBS_DIM), examples.reshape(-1, self.capacity,
+                                                                              OBS_DIM))
+        near = (within.reshape(stored.shape) & stored & labels).any(-1)
         if bool(mask.all()):
             return near
         out = torch.zeros_like(self.trained)
@@ -231,14 +241,10 @@ class InitiationClassifier(nn.Module):
                 continue
             member = (rowwise_dot(self.phi(chunk), w[None, :]) + b) > 0
             if constrained:
-                squared = None
-                for j in self.distance_dims:
-                    diff = positives[None, :, j] - chunk[:, j, None]
-                    squared = diff * diff if squared is None else squared + diff * diff
-                if squared is None or squared.shape[1] == 0:
+                if positives.shape[0] == 0:
                     near = torch.zeros_like(member)
                 else:
-                    near = (squared <= self.distance * self.distance).any(-1)
+                    near = self._within(chunk, positives).any(-1)
                 member = member & near
             out.append(member)
         return torch.cat(out) if out else torch.zeros(0, dtype=torch.bool, device=w.device)

@@ -311,3 +311,23 @@ def test_fit_runs_over_a_length_set_by_the_slots_own_count():
     assert together.fit().sum().item() == 2 and alone.fit().sum().item() == 1
     assert torch.equal(together.weight[0, 1], alone.weight[0, 0])
     assert torch.equal(together.bias[0, 1], alone.bias[0, 0])
+
+
+def test_distance_constraint_same_bits_alone_in_a_population_and_when_drawn():
+    clf = InitiationClassifier(population=4, slots=2, capacity=64, distance=0.25)
+    gen = torch.Generator().manual_seed(7)
+    for p in range(4):
+        x = torch.rand(64, 4, dtype=F64, generator=gen)
+        clf.add_examples(p, 1, x, x[:, 0] < 0.6)
+    clf.fit()
+    clf.constrain(torch.ones(4, 2, dtype=torch.bool))
+    points = torch.rand(300, 4, dtype=F64, generator=gen)
+    for p in range(4):
+        alone = clf.select_agents([p])
+        drawn = clf.contains_points(p, 1, points)
+        for i in range(0, 300, 7):
+            obs = points[i : i + 1]
+            together = clf.near_positive(obs.expand(4, 4).contiguous())[p, 1]
+            assert bool(together) == bool(alone.near_positive(obs)[0, 1])
+            member = clf.contains(obs.expand(4, 4).contiguous())[p, 1]
+            assert bool(member) == bool(drawn[i])
