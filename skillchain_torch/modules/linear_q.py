@@ -77,10 +77,9 @@ class LinearQHead(nn.Module):
         index = rows.nonzero()[:, 0]
         q = torch.zeros(self.population, self.num_decisions, dtype=self.weight.dtype,
                         device=self.weight.device)  # fmt: skip
-        d = self.num_decisions if decisions is None else max(1, min(int(decisions),
-                                                                    self.num_decisions))
-        weight = self.weight[index, :d] if d < self.num_decisions else self.weight[index]
-        q[index, :d] = rowwise_dot(weight, phi[index][:, None, :].to(self.weight.dtype))
+        d = self.num_decisions if decisions is None else min(int(decisions), self.num_decisions)
+        q[index, :d] = rowwise_dot(self.weight[index, :d],
+                                   phi[index][:, None, :].to(self.weight.dtype))  # fmt: skip
         return q
 
     def q_value(self, phi: Tensor, decision: Tensor) -> Tensor:

@@ -90,8 +90,9 @@ class InitiationClassifier(nn.Module):
     weight and ``bias`` both act as the intercept, as ``nn.Linear`` over ``PolynomialFeatures``
     would. With a cap the distance constraint anchors on the *stored*
     positives (a uniform subsample under ``"reservoir"``), not on every positive ever seen.
-    All maths is elementwise or :mod:`~skillchain_torch.invariant` reductions, so agent p's
-    numbers are bit-identical alone or in a population.
+    All maths is elementwise, :mod:`~skillchain_torch.invariant` reductions or pairwise
+    ``cdist`` (each pair on its own), so agent p's numbers are bit-identical alone or in a
+    population.
 
     Buffers (``[P, K]`` unless noted): ``examples [P, K, C, 4]``, ``labels [P, K, C]`` (bool),
     ``count`` (stored), ``seen`` (ever added), ``generation`` (resets), ``sweeps_done``,
@@ -343,10 +344,9 @@ class InitiationClassifier(nn.Module):
     def fit_length(self, count: Tensor) -> Tensor:
         """Examples a fit runs over for slots holding ``count``: the next power of two of at
         least 8, at most the capacity."""
-        length = torch.full_like(count, 8)
-        while bool((length < count).any()):
-            length = torch.where(length < count, 2 * length, length)
-        return length.clamp(max=self.capacity)
+        # log2 and exp2 are exact on powers of two, so ceil lands on the right one.
+        exponent = torch.ceil(torch.log2(count.clamp(min=8).to(torch.float64)))
+        return torch.exp2(exponent).to(count.dtype).clamp(max=self.capacity)
 
     def _fit_slots(self, pi: Tensor, ki: Tensor, length: int) -> None:
         """``sweeps`` full-batch gradient steps on slots ``(pi, ki)`` over ``length`` examples.
