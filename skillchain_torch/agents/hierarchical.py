@@ -183,29 +183,30 @@ class HierarchicalAgent(nn.Module):
         Only the agents in ``rows [P]`` (default all) need a decision: an executing option that
         goes on needs none, and the 5 + K values are the top level's largest cost. Other rows'
         decisions are meaningless. ``phi`` and ``Q(obs, .)`` stay in ``last_phi`` and
-        ``last_q`` for subclasses (``last_q`` valid on ``rows``)."""
+        ``last_q`` for subclasses (``last_q`` valid on ``rows`` for the available decisions,
+        0 for the others)."""
         phi = self.features(obs)
-        # Decisions past the last slot any agent uses are unavailable everywhere (an empty
-        # slot never is) and need no value: early in skill chaining most slots are empty.
-        used = self.bank.live().any(0).nonzero()
-        decisions = NUM_PRIMITIVES + (int(used[-1, 0]) + 1 if used.shape[0] > 0 else 0)
+        available = self.top_level_available(obs, contains)
         rows = torch.ones_like(self.active) if rows is None else rows
-        q = self.q_head.forward_rows(phi, rows, decisions)
+        # Value only what can be chosen: the primitives, and the few options whose initiation
+        # set holds the state (each value is the same row sum as a full forward).
+        q = self.q_head.forward_mask(phi, available & rows[:, None], dense=NUM_PRIMITIVES)
         self.last_phi, self.last_q = phi, q
-        return phi, epsilon_greedy(q, self.top_level_available(obs, contains), self.epsilon,
-                                   uniforms, check=False)  # primitives are always available
+        return phi, epsilon_greedy(q, available, self.epsilon, uniforms,
+                                   check=False)  # primitives are always available
 
     def _act(self, rows: Tensor, uniforms: Tensor) -> None:
         """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's
         epsilon-greedy action by its Q-head at the current state."""
         action = self.decision.clamp(max=NUM_PRIMITIVES - 1)
         executing = rows & (self.option >= 0)
-        if bool(executing.any()):
-            q_opt = self.bank.q_head.slot_values(self.option_code, self.option)  # [P, A]
+        index = executing.nonzero()[:, 0]
+        if index.numel() > 0:  # only the executing rows' option values (a row's own sums)
+            q_opt = self.bank.q_head.slot_values_rows(self.option_code, self.option, index)
             all_actions = torch.ones_like(q_opt, dtype=torch.bool)
-            by_option = epsilon_greedy(q_opt, all_actions, self.option_epsilon, uniforms,
+            by_option = epsilon_greedy(q_opt, all_actions, self.option_epsilon, uniforms[index],
                                        check=False)  # fmt: skip
-            action = torch.where(executing, by_option, action)
+            action = action.index_put((index,), by_option)
         self.action = torch.where(rows, action, self.action)
 
     def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
@@ -274,9 +275,11 @@ class HierarchicalAgent(nn.Module):
         # Next top-level decision at s' (also the bootstrap decision d').
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
         phi_next, d_next = self._choose(next_obs, contains_next, u[:, :2], rows=decision_ended)
+        # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
+        q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
         smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
                                  self.decision_return, self.duration.clamp(min=1), phi_next,
-                                 d_next, terminated, active=decision_ended)
+                                 d_next, terminated, active=decision_ended, next_value=q_next)
         # The state tensors are replaced, never written in place, so no copies are needed.
         info = {"decision_ended": decision_ended, "duration": self.duration,
                 "decision_return": self.decision_return, "option_delta": option_delta,

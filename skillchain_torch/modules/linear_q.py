@@ -17,7 +17,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from skillchain_torch.invariant import rowwise_dot
+from skillchain_torch.invariant import rowwise_dot, rowwise_sum
 
 
 class LinearQHead(nn.Module):
@@ -74,13 +74,58 @@ class LinearQHead(nn.Module):
         primitives and the option slots in use; each value is the same row sum either way.
         """
         self._check_phi(phi)
+        d = self.num_decisions if decisions is None else min(int(decisions), self.num_decisions)
         index = rows.nonzero()[:, 0]
         q = torch.zeros(self.population, self.num_decisions, dtype=self.weight.dtype,
                         device=self.weight.device)  # fmt: skip
-        d = self.num_decisions if decisions is None else min(int(decisions), self.num_decisions)
-        q[index, :d] = rowwise_dot(self.weight[index, :d],
-                                   phi[index][:, None, :].to(self.weight.dtype))  # fmt: skip
+        phi = phi.to(self.weight.dtype)
+        if 2 * index.numel() < self.population:  # few rows: gather them
+            q[index, :d] = rowwise_dot(self.weight[index, :d], phi[index][:, None, :])
+            return q
+        # Most rows: multiply every row into a reused buffer rather than gather ~all weights
+        # (a copy as large as the product). Each value is the same row sum; others are dropped.
+        product = self._product(d)
+        torch.mul(self.weight[:, :d], phi[:, None, :], out=product)
+        q[:, :d] = torch.where(rows[:, None], rowwise_sum(product), 0.0)
         return q
+
+    def forward_mask(self, phi: Tensor, need: Tensor, dense: int = 0) -> Tensor:
+        """Values where ``need [P, D]`` (bit-equal to ``forward`` there); 0 elsewhere.
+
+        The first ``dense`` decisions (e.g. the primitives, always available) are valued as in
+        :meth:`forward_rows` for every row needing any of them; the others (e.g. option slots,
+        available in a few states) by gathering just the needed ``(agent, decision)`` rows.
+
+        Example:
+            >>> head = LinearQHead(num_features=2, num_decisions=3, population=2)
+            >>> head.weight.fill_(1.0)[1, 2] = 3.0
+            >>> phi = torch.ones(2, 2, dtype=torch.float64)
+            >>> need = torch.tensor([[True, False, False], [True, False, True]])
+            >>> head.forward_mask(phi, need, dense=1).tolist()
+            [[2.0, 0.0, 0.0], [2.0, 0.0, 6.0]]
+        """
+        if tuple(need.shape) != (self.population, self.num_decisions):
+            raise ValueError(f"need must be [P={self.population}, D={self.num_decisions}], "
+                             f"got {tuple(need.shape)}")  # fmt: skip
+        q = self.forward_rows(phi, need[:, :dense].any(-1), dense)
+        pi, di = need[:, dense:].nonzero().unbind(-1)
+        if pi.numel() > 0:
+            di = di + dense
+            q[pi, di] = rowwise_dot(self.weight[pi, di], phi[pi].to(self.weight.dtype))
+        return q
+
+    def _product(self, decisions: int) -> Tensor:
+        """A contiguous ``[P, decisions, F]`` scratch view of one buffer kept across calls
+        (allocating megabytes every step costs page faults)."""
+        size = self.population * self.num_decisions * self.num_features
+        buffer = self.__dict__.get("_scratch")
+        w = self.weight
+        if buffer is None or buffer.numel() != size or buffer.dtype != w.dtype \
+                or buffer.device != w.device:  # fmt: skip
+            buffer = torch.empty(size, dtype=w.dtype, device=w.device)
+            self.__dict__["_scratch"] = buffer
+        return buffer[: self.population * decisions * self.num_features].view(
+            self.population, decisions, self.num_features)
 
     def q_value(self, phi: Tensor, decision: Tensor) -> Tensor:
         """``Q(s_p, decision_p)`` for each agent: ``[P]``; bit-equal to ``forward`` gathered."""

@@ -26,6 +26,7 @@ import functools
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.invariant import rowwise_dot
 from skillchain_torch.modules.linear_q import LinearQHead
 
 
@@ -109,6 +110,7 @@ class SarsaUpdate(nn.Module):
         next_decision: Tensor,
         terminal: Tensor,
         active: Tensor | None = None,
+        next_value: Tensor | None = None,
     ) -> Tensor:
         """Apply one SMDP Sarsa step per active agent.
 
@@ -121,6 +123,8 @@ class SarsaUpdate(nn.Module):
             duration: ``k``, the number of primitive steps the decision lasted (int, >= 1).
             terminal: ``BoolTensor [P]``: the episode ended in ``s'`` (no bootstrap).
             active: ``BoolTensor [P]``; agents outside it neither learn nor report an error.
+            next_value: ``Q(s', d') [P]`` when the caller already has it (valued with the
+                current weights, as when ``d'`` was chosen); ``next_phi`` is then unused.
         """
         population = q_head.population
         device = q_head.weight.device
@@ -133,8 +137,14 @@ class SarsaUpdate(nn.Module):
         bootstraps = active & ~terminal
         next_decision = torch.where(bootstraps, _flat(next_decision, population), zero)
 
-        q_sa = q_head.q_value(phi, decision)
-        q_next = q_head.q_value(next_phi, next_decision)
+        # One gather of the updated rows serves Q(s, d) and the write-back.
+        agents = torch.arange(population, device=device)
+        w_sa = q_head.weight[agents, decision]
+        q_sa = rowwise_dot(w_sa, phi.to(w_sa.dtype))  # = q_head.q_value(phi, decision)
+        if next_value is None:
+            q_next = q_head.q_value(next_phi, next_decision)
+        else:
+            q_next = _flat(next_value, population).to(q_sa.dtype)
         delta = smdp_td_error(
             _flat(reward, population),
             _flat(duration, population),
@@ -145,7 +155,8 @@ class SarsaUpdate(nn.Module):
         )
         delta = torch.where(active, delta, torch.zeros_like(delta))
         increment = self.step_size * (delta[:, None] * phi.to(delta.dtype))
-        q_head.add_to_decision(decision, increment, mask=active)
+        # = q_head.add_to_decision(decision, increment, mask=active)
+        q_head.weight[agents, decision] = torch.where(active[:, None], w_sa + increment, w_sa)
         return delta
 
     def extra_repr(self) -> str:

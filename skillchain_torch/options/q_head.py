@@ -122,6 +122,10 @@ class OptionQHead(nn.Module, ABC):
         k = slot.clamp(min=0)[:, None, None].expand(-1, 1, q.shape[-1])
         return q.gather(1, k)[:, 0]
 
+    def slot_values_rows(self, code: Tensor, slot: Tensor, index: Tensor) -> Tensor:
+        """:meth:`slot_values` of the agents ``index [n]`` only: ``[n, A]``."""
+        return self.slot_values(code, slot)[index]
+
     def max_values(self, code: Tensor, mask: Tensor) -> Tensor:
         """``max_a Q_k(s_p, a)`` for the ``(p, k)`` in ``mask [P, K]``; others unspecified."""
         return self.forward_code(code).amax(-1)
@@ -231,6 +235,10 @@ class FourierOptionQHead(OptionQHead):
     def slot_values(self, code: Tensor, slot: Tensor) -> Tensor:
         agents = torch.arange(self.population, device=self.weight.device)
         return rowwise_dot(self.weight[agents, slot.clamp(min=0)], code[:, None, :])
+
+    def slot_values_rows(self, code: Tensor, slot: Tensor, index: Tensor) -> Tensor:
+        # Gather just these rows' weights; each value is the same row sum as in slot_values.
+        return rowwise_dot(self.weight[index, slot[index].clamp(min=0)], code[index][:, None, :])
 
     def max_values(self, code: Tensor, mask: Tensor) -> Tensor:
         # Only the masked slots: each row's sum is the same wherever it sits (rowwise_dot).

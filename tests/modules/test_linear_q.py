@@ -90,3 +90,28 @@ def test_shape_check():
     head = LinearQHead(4, 2, 3)
     with pytest.raises(ValueError):
         head(torch.zeros(2, 4, dtype=F64))
+
+
+@pytest.mark.parametrize("share", [0.2, 0.9])  # the gather path and the whole-population path
+def test_forward_rows_and_forward_mask_equal_forward_bitwise_where_asked(share):
+    population, decisions = 8, 9
+    head = random_head(population, decisions, 625, seed=4)
+    gen = torch.Generator().manual_seed(6)
+    phi = torch.rand(population, 625, dtype=F64, generator=gen)
+    full = head(phi)
+    rows = torch.rand(population, generator=gen) < share
+    rows[0] = True
+    q = head.forward_rows(phi, rows, decisions=6)
+    assert torch.equal(q[rows, :6], full[rows, :6])
+    assert not bool(q[~rows].any()) and not bool(q[:, 6:].any())
+    need = torch.rand(population, decisions, generator=gen) < 0.3
+    need[:, :5] = rows[:, None]
+    q = head.forward_mask(phi, need, dense=5)
+    assert torch.equal(q[need], full[need])
+    assert not bool(q[~need].any())
+    for p in range(population):  # one agent alone gets the same bits
+        alone = LinearQHead(625, decisions, 1)
+        alone.weight.copy_(head.weight[p : p + 1])
+        assert torch.equal(alone.forward_mask(phi[p : p + 1], need[p : p + 1], dense=5)[0], q[p])
+    with pytest.raises(ValueError, match="need must be"):
+        head.forward_mask(phi, need[:, :5])

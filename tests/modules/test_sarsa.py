@@ -165,3 +165,24 @@ def test_reduces_td_error_on_a_tiny_chain():
             first_sweep = sum(errors)
     assert sum(errors) < 1e-6 < first_sweep
     assert torch.allclose(head.weight[0, :, :2], t([[-2.0, -1.0], [-2.0, 0.0]]), atol=1e-6)
+
+
+def test_given_next_value_is_the_same_update_as_valuing_next_phi():
+    gen = torch.Generator().manual_seed(2)
+    weight = torch.randn(6, 4, 30, dtype=F64, generator=gen)
+    heads = [head_with(weight.tolist()) for _ in range(2)]
+    phi, next_phi = (torch.rand(6, 30, dtype=F64, generator=gen) for _ in range(2))
+    decision, next_decision = torch.tensor([0, 1, 2, 3, 0, 1]), torch.tensor([3, 3, 1, 0, 2, 2])
+    args = dict(reward=t([-1.0, -5.0, 3.0, 0.0, 2.0, -1.0]),
+                duration=torch.tensor([1, 2, 1, 7, 1, 1]),
+                terminal=torch.tensor([False, False, True, False, False, False]),
+                active=torch.tensor([True, True, True, False, True, True]))
+    update = SarsaUpdate(alpha=0.01, gamma=0.9)
+    plain = update(heads[0], phi, decision, next_phi=next_phi, next_decision=next_decision,
+                   **args)  # fmt: skip
+    value = heads[1].q_value(next_phi, next_decision)
+    given = update(heads[1], phi, decision, next_phi=None, next_decision=next_decision,
+                   next_value=value, **args)  # fmt: skip
+    assert torch.equal(plain, given) and bool(plain[:3].ne(0).all()) and float(plain[3]) == 0.0
+    assert torch.equal(heads[0].weight, heads[1].weight)
+    assert not torch.equal(heads[0].weight, weight)

@@ -185,3 +185,13 @@ def test_mlp_initial_weights_depend_only_on_the_agent_seed():
         assert torch.equal(alone.params[key][0], value[2])
     copy = together.select_agents([2, 2])
     assert torch.equal(copy.params["0__weight"][1], together.params["0__weight"][2])
+
+
+def test_slot_values_rows_is_slot_values_of_those_rows_bitwise():
+    head = random_fourier(5, 4, seed=8)
+    gen = torch.Generator().manual_seed(9)
+    code = head.encode(torch.rand(5, 4, dtype=F64, generator=gen))
+    slot = torch.tensor([2, -1, 0, 3, 1])
+    index = torch.tensor([0, 2, 3])
+    rows = head.slot_values_rows(code, slot, index)
+    assert torch.equal(rows, head.slot_values(code, slot)[index])
