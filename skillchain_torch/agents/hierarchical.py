@@ -59,13 +59,39 @@ from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
 
-__all__ = ["HierarchicalAgent", "NUM_PRIMITIVES", "MAX_OPTION_STEPS", "UNIFORMS_PER_STEP"]
+__all__ = ["HierarchicalAgent", "shared_fourier_columns", "NUM_PRIMITIVES", "MAX_OPTION_STEPS",
+           "UNIFORMS_PER_STEP"]
 
 NUM_PRIMITIVES = 5
 OBS_DIM = 4
 MAX_OPTION_STEPS = 250
 UNIFORMS_PER_STEP = 4  # top-level (explore, pick), option (explore, pick)
 AGENT_STREAM = 0
+
+
+def shared_fourier_columns(basis: FourierBasis, q_head) -> Tensor | None:
+    """Where the option heads' Fourier features sit among ``basis``'s, or ``None``.
+
+    A :class:`~skillchain_torch.options.FourierOptionQHead` of order ``o <= basis.order`` over
+    the same observation has coefficient vectors ``c in {0..o}^4``, a subset of ``basis``'s,
+    and :class:`FourierBasis` computes each ``cos(pi c . s)`` the same way whatever the order
+    (``c . s`` summed over the dims in order from the same products ``s_j * c_j``, then an
+    elementwise cosine), so ``q_head.encode(s)`` equals ``basis(s)[:, columns]`` bit for bit.
+
+    Example:
+        >>> from skillchain_torch.options import FourierOptionQHead
+        >>> columns = shared_fourier_columns(FourierBasis(4, 4), FourierOptionQHead(1, 1, order=3))
+        >>> columns.shape, columns[:3].tolist()
+        (torch.Size([256]), [0, 1, 2])
+    """
+    inner = getattr(q_head, "basis", None)
+    if (not isinstance(inner, FourierBasis) or inner.dim != basis.dim
+            or inner.order > basis.order or inner.coefficients.dtype != basis.coefficients.dtype
+            or inner.coefficients.device != basis.coefficients.device):  # fmt: skip
+        return None
+    radix = basis.order + 1
+    places = radix ** torch.arange(basis.dim - 1, -1, -1, device=inner.coefficients.device)
+    return (inner.coefficients.to(torch.int64) * places).sum(-1)
 
 
 class HierarchicalAgent(nn.Module):
@@ -117,6 +143,7 @@ class HierarchicalAgent(nn.Module):
         self.max_option_steps = int(max_option_steps)
         self.events = tuple(events)
         self.features = FourierBasis(OBS_DIM, order).to(device)
+        self._code_columns = shared_fourier_columns(self.features, self.bank.q_head)
         self.q_head = LinearQHead(self.features.num_features, self.num_decisions,
                                   self.population, device=device)
         scale = self.features.step_size_scale() if scale_step_size else None
@@ -176,16 +203,29 @@ class HierarchicalAgent(nn.Module):
         """``[P, K]``: each live option's termination predicate (target event) at ``s'``."""
         return self.bank.target_reached(next_obs, terminated, self.events, contains=contains)
 
+    def _encode(self, obs: Tensor) -> tuple[Tensor, Tensor]:
+        """``(phi(s), option code of s)``: the top-level features and the option heads' code.
+
+        When the option heads use a Fourier basis of the same observation and no higher order
+        (the paper: order 3 under order 4), their features are columns of the top level's,
+        computed with the same arithmetic (see :func:`shared_fourier_columns`), so they are
+        picked rather than computed again."""
+        phi = self.features(obs)
+        if self._code_columns is None:
+            return phi, self.bank.q_head.encode(obs)
+        return phi, phi[:, self._code_columns]
+
     def _choose(self, obs: Tensor, contains: Tensor, uniforms: Tensor,
-                rows: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
+                rows: Tensor | None = None,
+                phi: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
         """Top-level epsilon-greedy decision at ``obs``; ``(phi, decision)``.
 
         Only the agents in ``rows [P]`` (default all) need a decision: an executing option that
         goes on needs none, and the 5 + K values are the top level's largest cost. Other rows'
         decisions are meaningless. ``phi`` and ``Q(obs, .)`` stay in ``last_phi`` and
         ``last_q`` for subclasses (``last_q`` valid on ``rows`` for the available decisions,
-        0 for the others)."""
-        phi = self.features(obs)
+        0 for the others). ``phi``: ``features(obs)`` if the caller has it."""
+        phi = self.features(obs) if phi is None else phi
         available = self.top_level_available(obs, contains)
         rows = torch.ones_like(self.active) if rows is None else rows
         # Value only what can be chosen: the primitives, and the few options whose initiation
@@ -215,10 +255,10 @@ class HierarchicalAgent(nn.Module):
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=rows)
         obs = torch.where(rows[:, None], obs, self.obs)
         contains = self.membership(obs)
-        phi, decision = self._choose(obs, contains, u[:, :2], rows=rows)
+        phi, code = self._encode(obs)
+        phi, decision = self._choose(obs, contains, u[:, :2], rows=rows, phi=phi)
         self.obs = obs
-        self.option_code = torch.where(rows[:, None], self.bank.q_head.encode(obs),
-                                       self.option_code)  # fmt: skip
+        self.option_code = torch.where(rows[:, None], code, self.option_code)
         self.contains = torch.where(rows[:, None], contains, self.contains)
         self._new_decisions(rows, phi, decision)
         self._act(rows, u[:, 2:])
@@ -254,7 +294,7 @@ class HierarchicalAgent(nn.Module):
         contains_next = self.membership(next_obs)
         reached = self.targets(next_obs, terminated, contains_next)
         # Intra-option Q-learning: every live option whose initiation set holds s.
-        next_code = bank.q_head.encode(next_obs)
+        phi_next, next_code = self._encode(next_obs)
         option_delta = self.option_update(
             bank.q_head, self.obs, self.action, reward, next_obs, terminated, self.contains,
             reached, learnable=bank.live() & stepped[:, None], code=self.option_code,
@@ -274,7 +314,8 @@ class HierarchicalAgent(nn.Module):
         decision_ended = stepped & (~executing | option_stops | ended)
         # Next top-level decision at s' (also the bootstrap decision d').
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
-        phi_next, d_next = self._choose(next_obs, contains_next, u[:, :2], rows=decision_ended)
+        phi_next, d_next = self._choose(next_obs, contains_next, u[:, :2], rows=decision_ended,
+                                        phi=phi_next)  # fmt: skip
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
         smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
@@ -396,7 +437,7 @@ class HierarchicalAgent(nn.Module):
         self.decision_phi = state["phi"].to(device).clone()
         for name in self._EPISODE:
             setattr(self, name, state["episode"][name].to(device).clone())
-        self.option_code = self.bank.q_head.encode(self.obs)  # a pure function of s
+        self.option_code = self._encode(self.obs)[1]  # a pure function of s
 
     def extra_repr(self) -> str:
         return (f"population={self.population}, slots={self.slots}, "

@@ -77,10 +77,13 @@ class ExecutionTrace:
 
     def start(self, rows: Tensor, slot: Tensor) -> None:
         """Agents in ``rows [P]`` start executing option ``slot [P]``: keep its weights."""
-        current = self.q_head.read_slots(slot)
-        for name, value in current.items():
-            keep = rows.reshape(-1, *[1] * (value.ndim - 1))
-            self.snapshot[name] = torch.where(keep, value, self.snapshot[name])
+        index = rows.nonzero()[:, 0]
+        if index.numel() == 0:
+            return
+        # Copy just the starting agents' slots (a few rows of [P, ...] weights).
+        k = slot[index].clamp(min=0)
+        for name, value in self.q_head.slot_tensors().items():
+            self.snapshot[name][index] = value[index, k].to(self.snapshot[name].dtype)
 
     def record(self, rows: Tensor, step: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` as step ``step [P]`` (0-based)."""

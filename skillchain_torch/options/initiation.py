@@ -292,14 +292,16 @@ class InitiationClassifier(nn.Module):
             u = reservoir_uniform(self.seeds[p], k, self.generation[p, k], index)
             draw = torch.minimum(torch.floor(u * (index + 1).to(u.dtype)).to(torch.int64), index)
             position = torch.where(index < cap, index, torch.where(draw < cap, draw, -1))
-        # Later examples overwrite earlier ones at the same place, as a sequential loop would.
-        cell = flat * cap + position.clamp(min=0)
-        last = torch.full((self.population * self.slots * cap,), -1, device=device,
-                          dtype=torch.int64)  # fmt: skip
-        last.scatter_reduce_(0, cell[position >= 0], arange[position >= 0], reduce="amax")
-        keep = (position >= 0) & (last[cell] == arange)
-        self.examples.view(-1, OBS_DIM)[cell[keep]] = obs[keep].to(self.examples.dtype)
-        self.labels.view(-1)[cell[keep]] = labels[keep].to(device).to(torch.bool)
+        # Later examples overwrite earlier ones at the same place, as a sequential loop would:
+        # of the examples written to one place, keep the last (a stable sort over the few
+        # new examples, not a buffer the size of the stores).
+        placed = (position >= 0).nonzero()[:, 0]
+        cell, order = torch.sort(flat[placed] * cap + position[placed], stable=True)
+        last = torch.ones_like(cell, dtype=torch.bool)
+        last[:-1] = cell[1:] != cell[:-1]
+        keep, cell = placed[order[last]], cell[last]
+        self.examples.view(-1, OBS_DIM)[cell] = obs[keep].to(self.examples.dtype)
+        self.labels.view(-1)[cell] = labels[keep].to(device).to(torch.bool)
         self.seen.view(-1).index_add_(0, flat, torch.ones_like(flat))
         self.count.copy_(torch.clamp(self.seen, max=cap))
         touched[flat] = True
@@ -351,7 +353,7 @@ class InitiationClassifier(nn.Module):
     def _fit_slots(self, pi: Tensor, ki: Tensor, length: int) -> None:
         """``sweeps`` full-batch gradient steps on slots ``(pi, ki)`` over ``length`` examples.
 
-        Written for few tensor operations per sweep (nine): the bias rides as a last weight
+        Written for few tensor operations per sweep (six calls): the bias rides as a last weight
         on a constant feature, each example's step ``lr * its weight in the mean`` (0 for
         empty places) is folded in once, and the loop carries the negated parameters ``v``
         so that ``exp(x . v)`` is ``exp(-z)``: a sweep is ``g = s / (1 + exp(x . v)) - s y``
@@ -374,9 +376,20 @@ class InitiationClassifier(nn.Module):
         step = torch.where(stored, self.lr * weight, zero)  # [M, L]
         step_y = step * y
         v = -torch.cat([self.weight[pi, ki], self.bias[pi, ki, None]], dim=-1)  # [M, F + 1]
+        # A sweep is a handful of calls on small tensors, so it is written as few calls as
+        # possible, into buffers made once: the same arithmetic as
+        #   g = step / (1 + exp((x * v).sum(-1))) - step_y;  v = v + (xt * g).sum(-1)
+        # (vecdot is that product and sum; addcdiv adds -step_y to step / (...), which is
+        # the same subtraction).
+        minus_step_y = -step_y
+        z, g, dv = torch.empty_like(step), torch.empty_like(step), torch.empty_like(v)
+        v_row, g_row = v.view(v.shape[0], 1, -1), g.view(g.shape[0], 1, -1)
         for _ in range(self.sweeps):
-            g = step / (1.0 + torch.exp((x * v[:, None, :]).sum(-1))) - step_y  # [M, L]
-            v = v + (xt * g[:, None, :]).sum(-1)
+            torch.linalg.vecdot(x, v_row, out=z)  # x . v = -logit, [M, L]
+            z.exp_().add_(1.0)
+            torch.addcdiv(minus_step_y, step, z, out=g)
+            torch.linalg.vecdot(xt, g_row, out=dv)  # sum over the examples, [M, F + 1]
+            v.add_(dv)
         # Each sum above reduces a contiguous last dim with more than one row, so every row is
         # summed alone in a fixed order (see skillchain_torch.invariant).
         self.weight[pi, ki] = -v[:, :-1]

@@ -154,12 +154,10 @@ class OptionQHead(nn.Module, ABC):
     def write_slots(self, slot: Tensor, values: dict[str, Tensor], mask: Tensor) -> None:
         """Put ``values`` (from :meth:`read_slots`) back into slot ``slot[p]`` of the agents
         in ``mask [P]``; other agents and slots are untouched."""
-        agents = torch.arange(self.population, device=slot.device)
-        k = slot.clamp(min=0)
+        index = mask.to(torch.bool).nonzero()[:, 0]
+        k = slot[index].clamp(min=0)
         for name, t in self.slot_tensors().items():
-            current = t[agents, k]
-            keep = mask.reshape(-1, *[1] * (current.ndim - 1))
-            t[agents, k] = torch.where(keep, values[name].to(t.dtype), current)
+            t[index, k] = values[name][index].to(t.dtype)
 
     def reset_slot(self, agents: int | Tensor, slot: int | Tensor) -> None:
         """Reset slot ``slot`` (int or ``[P]``) of ``agents`` (index or ``BoolTensor [P]``)."""

@@ -381,3 +381,19 @@ def test_option_reaches_region_in_the_real_physics():
     expected = w.clone()
     expected[0, 5] += 0.01 * delta * phi0
     torch.testing.assert_close(agent.q_head.weight, expected, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(("top", "inner"), [(4, 3), (5, 3), (3, 3), (2, 3)])
+def test_option_code_is_picked_from_the_top_level_features_bit_for_bit(top, inner):
+    from skillchain_torch.agents.hierarchical import shared_fourier_columns
+    from skillchain_torch.features import FourierBasis
+    from skillchain_torch.options import FourierOptionQHead
+
+    head = FourierOptionQHead(population=3, slots=2, order=inner)
+    basis = FourierBasis(4, top)
+    columns = shared_fourier_columns(basis, head)
+    if top < inner:  # a coarser top level cannot supply the option features
+        assert columns is None
+        return
+    obs = torch.rand(50, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(top))
+    assert torch.equal(basis(obs)[:, columns], head.basis(obs))
