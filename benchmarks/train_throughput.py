@@ -12,6 +12,10 @@ decision and Sarsa update. The peer is a plain per-step NumPy loop of the same a
 same physics (``scalar.step_one``), one agent, written below as one would write it by hand;
 ratios are ours / peer, measured in the same invocation.
 
+The skill-chaining rows time agents with options live against flat agents of the same
+population size, in alternating chunks (``--rounds``), and report the median cost per agent
+step and its range over the rounds.
+
 The last line times a whole population run (``--full``: 100 agents x 250 episodes, the paper's
 experiment; default: 100 agents x 5 episodes, said so in the output).
 """
@@ -21,6 +25,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import math
+import statistics
 import time
 from pathlib import Path
 
@@ -96,9 +101,8 @@ class NumpySarsa:
 OPTIONS = Path(__file__).parent / "data" / "skill_chaining_options.pt"
 
 
-def time_skill_chaining(population: int, agent_steps: int, threads: int,
-                        repeats: int = 2) -> float:  # fmt: skip
-    """Best rate (agent steps / s) of skill-chaining agents with options live.
+def skill_chaining_trainer(population: int, threads: int, seed: int = 0) -> PopulationTrainer:
+    """Skill-chaining agents with options live, warmed up.
 
     Every agent starts with the options one agent discovered in a real run
     (``benchmarks/data/skill_chaining_options.pt``: agent 2 of the seed-0 run of
@@ -110,19 +114,39 @@ def time_skill_chaining(population: int, agent_steps: int, threads: int,
     """
     from skillchain_torch.options import OptionBank
 
-    best = 0.0
-    for r in range(repeats):
-        cfg = TrainConfig(agent="skill-chaining", map=MAP, runs=population, episodes=10_000,
-                          seed=r, slots=12)  # fmt: skip
-        trainer = PopulationTrainer(cfg, num_threads=threads)
-        seeds = torch.arange(population, dtype=torch.int64) + r
-        given = OptionBank.from_agent(OPTIONS, 0, population, seeds=seeds)
-        trainer.agent.bank.load_state_dict(given.state_dict())
-        trainer.train(max_agent_steps=20 * population)
-        start, done = time.perf_counter(), trainer.agent_steps
-        trainer.train(max_agent_steps=done + agent_steps)
-        best = max(best, (trainer.agent_steps - done) / (time.perf_counter() - start))
-    return best
+    cfg = TrainConfig(agent="skill-chaining", map=MAP, runs=population, episodes=10_000,
+                      seed=seed, slots=12)  # fmt: skip
+    trainer = PopulationTrainer(cfg, num_threads=threads)
+    seeds = torch.arange(population, dtype=torch.int64) + seed
+    given = OptionBank.from_agent(OPTIONS, 0, population, seeds=seeds)
+    trainer.agent.bank.load_state_dict(given.state_dict())
+    trainer.train(max_agent_steps=20 * population)
+    return trainer
+
+
+def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
+                options_steps: int) -> tuple[float, float, list[float]]:  # fmt: skip
+    """Flat and skill-chaining rates (medians) and the cost of each round.
+
+    The two trainers run in alternating chunks (flat, then skill chaining, ``rounds`` times),
+    and each round gives one cost = (skill-chaining time per agent step) / (flat time per
+    agent step). This machine's speed drifts by tens of percent over minutes; timing the two
+    seconds apart keeps that drift out of the ratio, which best-of rates taken a minute apart
+    do not.
+    """
+    flat = PopulationTrainer(TrainConfig(map=MAP, runs=population, episodes=10_000, seed=0),
+                             num_threads=threads)  # fmt: skip
+    flat.train(max_agent_steps=20 * population)
+    options = skill_chaining_trainer(population, threads)
+    flat_rates, option_rates = [], []
+    for _ in range(rounds):
+        for trainer, steps, rates in ((flat, flat_steps, flat_rates),
+                                      (options, options_steps, option_rates)):  # fmt: skip
+            start, done = time.perf_counter(), trainer.agent_steps
+            trainer.train(max_agent_steps=done + steps)
+            rates.append((trainer.agent_steps - done) / (time.perf_counter() - start))
+    costs = [f / o for f, o in zip(flat_rates, option_rates)]
+    return statistics.median(flat_rates), statistics.median(option_rates), costs
 
 
 def time_population_run(runs: int, episodes: int, threads: int) -> tuple[float, int]:
@@ -138,6 +162,8 @@ def main() -> None:
     parser.add_argument("--full", action="store_true", help="time the 100 x 250 run")
     parser.add_argument("--steps", type=int, default=20_000, help="agent steps per row")
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
+    parser.add_argument("--rounds", type=int, default=9,
+                        help="alternating flat / skill-chaining chunks per cost row")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
@@ -149,15 +175,19 @@ def main() -> None:
     for population in (1, 10, 100):
         rate = time_trainer(population, args.steps, args.threads)
         print(f"{population:>5} | {rate:>14,.0f} | {peer:>11,.0f} | {rate / peer:>6.2f}")
-    print("\nskill chaining with options live (12 slots), same run; cost = time per agent "
-          "step relative to flat (target <= 2.5 at P = 100)")
-    print(f"{'P':>5} | {'flat steps/s':>13} | {'skill chaining':>14} | {'cost':>6}")
-    print(f"{'-' * 5}-|-{'-' * 13}-|-{'-' * 14}-|-{'-' * 6}")
+    print("\nskill chaining with options live (12 slots), alternating with flat agents in the "
+          "same process; cost = time per agent step relative to flat (target <= 2.5 at P = 100)")
+    print(f"{'P':>5} | {'flat steps/s':>13} | {'skill chaining':>14} | {'cost':>6} | "
+          f"{'cost range':>11}")
+    print(f"{'-' * 5}-|-{'-' * 13}-|-{'-' * 14}-|-{'-' * 6}-|-{'-' * 11}")
     for population in (1, 100):
-        steps = args.steps // 4 if population == 1 else args.steps
-        flat = time_trainer(population, steps, args.threads, repeats=2)
-        options = time_skill_chaining(population, steps, args.threads)
-        print(f"{population:>5} | {flat:>13,.0f} | {options:>14,.0f} | {flat / options:>6.2f}")
+        flat_steps, options_steps = (1_500, 300) if population == 1 else (10_000, 5_000)
+        scale = args.steps / 20_000
+        flat, options, costs = paired_cost(population, args.threads, args.rounds,
+                                           max(1, int(flat_steps * scale)),
+                                           max(1, int(options_steps * scale)))  # fmt: skip
+        print(f"{population:>5} | {flat:>13,.0f} | {options:>14,.0f} | "
+              f"{statistics.median(costs):>6.2f} | {min(costs):>5.2f}-{max(costs):<5.2f}")
     runs, episodes = (100, 250) if args.full else (100, 5)
     wall, steps = time_population_run(runs, episodes, args.threads)
     note = "" if args.full else " (short version; --full times the paper's 100 x 250)"

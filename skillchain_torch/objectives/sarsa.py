@@ -65,7 +65,8 @@ def smdp_td_error(
     A terminal transition does not bootstrap: ``Q(s', d')`` is ignored there (it may be any
     value, even inf). A truncated episode is not terminal and should bootstrap.
     """
-    bootstrap = discount(gamma, duration, q_sa.dtype) * q_next
+    # gamma^k = 1 exactly when gamma = 1 (the paper's), and 1 * q = q: skip the power table.
+    bootstrap = q_next if gamma == 1.0 else discount(gamma, duration, q_sa.dtype) * q_next
     bootstrap = torch.where(terminal.to(torch.bool), torch.zeros_like(bootstrap), bootstrap)
     return (reward.to(q_sa.dtype) + bootstrap) - q_sa
 
@@ -134,14 +135,14 @@ class SarsaUpdate(nn.Module):
         terminal = _flat(terminal, population).to(torch.bool)
         zero = torch.zeros_like(decision)
         decision = torch.where(active, _flat(decision, population), zero)
-        bootstraps = active & ~terminal
-        next_decision = torch.where(bootstraps, _flat(next_decision, population), zero)
 
         # One gather of the updated rows serves Q(s, d) and the write-back.
         agents = torch.arange(population, device=device)
         w_sa = q_head.weight[agents, decision]
         q_sa = rowwise_dot(w_sa, phi.to(w_sa.dtype))  # = q_head.q_value(phi, decision)
         if next_value is None:
+            bootstraps = active & ~terminal
+            next_decision = torch.where(bootstraps, _flat(next_decision, population), zero)
             q_next = q_head.q_value(next_phi, next_decision)
         else:
             q_next = _flat(next_value, population).to(q_sa.dtype)
