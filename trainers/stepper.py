@@ -20,6 +20,8 @@ raw state yet.
 
 from __future__ import annotations
 
+from array import array
+
 import torch
 from torch import Tensor
 
@@ -139,7 +141,7 @@ class ActiveEnvStepper:
             (x, y, vx, vy), term, _ = step_one(rows[i], a, board)
             rows[i] = (x, y, vx, vy)
             reward = _GOAL if term else (_NONE if a == 4 else _THRUST)
-            out.append((x, y, (vx + 1.0) / 2.0, (vy + 1.0) / 2.0, reward))
+            out += (x, y, (vx + 1.0) / 2.0, (vy + 1.0) / 2.0, reward)
             terms.append(term)
             any_term |= term
         counts = self._count_list
@@ -149,7 +151,10 @@ class ActiveEnvStepper:
         truncs = None
         if limit is not None:
             truncs = [c >= limit and not t for c, t in zip(counts, terms)]
-        buf = torch.tensor(out, dtype=self.env.dtype).reshape(-1, 5)
+        # A flat array of doubles read in place: a quarter of torch.tensor's cost on nested
+        # tuples, which showed at P = 1 (~10 us a step).
+        buf = torch.frombuffer(array("d", out), dtype=torch.float64).to(self.env.dtype)
+        buf = buf.reshape(-1, 5)
         obs, reward = buf[:, :4], buf[:, 4]
         if not (any_term or (truncs is not None and any(truncs))):
             return obs, reward, None
