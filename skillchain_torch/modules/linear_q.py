@@ -55,6 +55,8 @@ class LinearQHead(nn.Module):
         self.population = population
         weight = torch.zeros(population, num_decisions, num_features, dtype=dtype, device=device)
         self.register_buffer("weight", weight)
+        # Scratch space of forward_rows (not state): allocated on first use, reused after.
+        self.register_buffer("_scratch", None, persistent=False)
 
     def _check_phi(self, phi: Tensor) -> None:
         if phi.shape != (self.population, self.num_features):
@@ -118,12 +120,10 @@ class LinearQHead(nn.Module):
         """A contiguous ``[P, decisions, F]`` scratch view of one buffer kept across calls
         (allocating megabytes every step costs page faults)."""
         size = self.population * self.num_decisions * self.num_features
-        buffer = self.__dict__.get("_scratch")
-        w = self.weight
+        buffer, w = self._scratch, self.weight
         if buffer is None or buffer.numel() != size or buffer.dtype != w.dtype \
                 or buffer.device != w.device:  # fmt: skip
-            buffer = torch.empty(size, dtype=w.dtype, device=w.device)
-            self.__dict__["_scratch"] = buffer
+            buffer = self._scratch = torch.empty(size, dtype=w.dtype, device=w.device)
         return buffer[: self.population * decisions * self.num_features].view(
             self.population, decisions, self.num_features)
 
