@@ -143,7 +143,9 @@ class HierarchicalAgent(nn.Module):
         self.max_option_steps = int(max_option_steps)
         self.events = tuple(events)
         self.features = FourierBasis(OBS_DIM, order).to(device)
-        self._code_columns = shared_fourier_columns(self.features, self.bank.q_head)
+        self.register_buffer("_code_columns",
+                             shared_fourier_columns(self.features, self.bank.q_head),
+                             persistent=False)  # fmt: skip
         self.q_head = LinearQHead(self.features.num_features, self.num_decisions,
                                   self.population, device=device)
         scale = self.features.step_size_scale() if scale_step_size else None
