@@ -217,17 +217,15 @@ class HierarchicalAgent(nn.Module):
             return phi, self.bank.q_head.encode(obs)
         return phi, phi[:, self._code_columns]
 
-    def _choose(self, obs: Tensor, contains: Tensor, uniforms: Tensor,
-                rows: Tensor | None = None,
-                phi: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
+    def _choose(self, obs: Tensor, phi: Tensor, contains: Tensor, uniforms: Tensor,
+                rows: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
         """Top-level epsilon-greedy decision at ``obs``; ``(phi, decision)``.
 
         Only the agents in ``rows [P]`` (default all) need a decision: an executing option that
         goes on needs none, and the 5 + K values are the top level's largest cost. Other rows'
         decisions are meaningless. ``phi`` and ``Q(obs, .)`` stay in ``last_phi`` and
         ``last_q`` for subclasses (``last_q`` valid on ``rows`` for the available decisions,
-        0 for the others). ``phi``: ``features(obs)`` if the caller has it."""
-        phi = self.features(obs) if phi is None else phi
+        0 for the others). ``phi``: ``features(obs)``, from :meth:`_encode`."""
         available = self.top_level_available(obs, contains)
         rows = torch.ones_like(self.active) if rows is None else rows
         # Value only what can be chosen: the primitives, and the few options whose initiation
@@ -258,7 +256,7 @@ class HierarchicalAgent(nn.Module):
         obs = torch.where(rows[:, None], obs, self.obs)
         contains = self.membership(obs)
         phi, code = self._encode(obs)
-        phi, decision = self._choose(obs, contains, u[:, :2], rows=rows, phi=phi)
+        phi, decision = self._choose(obs, phi, contains, u[:, :2], rows=rows)
         self.obs = obs
         self.option_code = torch.where(rows[:, None], code, self.option_code)
         self.contains = torch.where(rows[:, None], contains, self.contains)
@@ -316,8 +314,8 @@ class HierarchicalAgent(nn.Module):
         decision_ended = stepped & (~executing | option_stops | ended)
         # Next top-level decision at s' (also the bootstrap decision d').
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
-        phi_next, d_next = self._choose(next_obs, contains_next, u[:, :2], rows=decision_ended,
-                                        phi=phi_next)  # fmt: skip
+        phi_next, d_next = self._choose(next_obs, phi_next, contains_next, u[:, :2],
+                                        rows=decision_ended)  # fmt: skip
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
         smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,

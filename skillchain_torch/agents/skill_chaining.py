@@ -41,7 +41,6 @@ from skillchain_torch.discovery import (
     MAX_BRANCHING,
     SkillChaining,
 )
-from skillchain_torch.invariant import rowwise_dot
 from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 
 from .hierarchical import MAX_OPTION_STEPS, NUM_PRIMITIVES, HierarchicalAgent
@@ -143,9 +142,8 @@ class SkillChainingAgent(HierarchicalAgent):
         # option had no update this step, so its value now is the value then.
         value_next = self.last_q.gather(1, self.decision[:, None])[:, 0]
         going_on = (stepped & ~info["decision_ended"]).nonzero()[:, 0]
-        if going_on.numel() > 0:  # the same row sums as q_head.q_value, for these rows only
-            weight = self.q_head.weight[going_on, self.decision[going_on]]
-            value_next[going_on] = rowwise_dot(weight, self.last_phi[going_on])
+        if going_on.numel() > 0:
+            value_next[going_on] = self.q_head.q_value(self.last_phi, self.decision, going_on)
         self.q_decision = torch.where(stepped, value_next, self.q_decision)
         self._begin_executions()
         return info

@@ -232,7 +232,7 @@ class SkillChaining:
         base_on, slot_on = event_list(bank, len(self.events), self.max_branching)
         base_trig, slot_trig = base_trig & base_on, slot_trig & slot_on
         if not (bool(base_trig.any()) or bool(slot_trig.any())):  # only unlisted events fired
-            return torch.zeros_like(self.slots_full_logged)
+            return torch.zeros(bank.population, dtype=torch.bool, device=base_trig.device)
         base_cov, slot_cov = covered_start(bank, len(self.events), contains, option)
         create, target_event, parent = choose_creation(base_trig, slot_trig, base_cov, slot_cov)
         if not bool(create.any()):

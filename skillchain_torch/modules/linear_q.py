@@ -127,11 +127,17 @@ class LinearQHead(nn.Module):
         return buffer[: self.population * decisions * self.num_features].view(
             self.population, decisions, self.num_features)
 
-    def q_value(self, phi: Tensor, decision: Tensor) -> Tensor:
-        """``Q(s_p, decision_p)`` for each agent: ``[P]``; bit-equal to ``forward`` gathered."""
+    def q_value(self, phi: Tensor, decision: Tensor, index: Tensor | None = None) -> Tensor:
+        """``Q(s_p, decision_p)`` for each agent: ``[P]``; bit-equal to ``forward`` gathered.
+
+        ``index [n]``: only these agents (``[n]`` values, the same bits as their entries of the
+        full result): the weight rows of the others are not read."""
         self._check_phi(phi)
-        rows = self.weight[torch.arange(self.population, device=decision.device), decision]
-        return rowwise_dot(rows, phi.to(self.weight.dtype))
+        if index is None:
+            index = torch.arange(self.population, device=decision.device)
+        else:
+            phi, decision = phi[index], decision[index]
+        return rowwise_dot(self.weight[index, decision], phi.to(self.weight.dtype))
 
     @torch.no_grad()
     def add_to_decision(self, decision: Tensor, increment: Tensor, mask: Tensor | None = None):

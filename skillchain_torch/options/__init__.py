@@ -5,7 +5,9 @@ The pieces (paper sections 2, 4 and 5.1), each batched over ``[P, K]`` (agents x
 - :class:`OptionStatus`: EMPTY / GESTATING / LEARNING / LEARNED per slot.
 - :class:`FourierOptionQHead` (the paper's linear learner) and :class:`MLPOptionQHead` (a
   ``torch.func``-stacked neural drop-in), both :class:`OptionQHead`.
-- :class:`InitiationClassifier`: logistic regression over polynomial features per slot.
+- :class:`InitiationClassifier`: logistic regression over polynomial features per slot; its
+  fitting maths in :func:`logistic_sweeps`, where examples go in its stores in
+  :func:`store_places`.
 - Termination predicates: :class:`GoalEvent`, :class:`RegionEvent`, :class:`InitiationSetEvent`,
   :class:`LambdaEvent`.
 - :class:`OptionBank`: bundles the above with per-slot metadata; save / load / select agents.
@@ -15,7 +17,9 @@ The intra-option Q-learning update lives in
 """
 
 from skillchain_torch.options.bank import FORMAT_VERSION, OptionBank
-from skillchain_torch.options.initiation import InitiationClassifier, reservoir_uniform
+from skillchain_torch.options.examples import reservoir_uniform, store_places
+from skillchain_torch.options.initiation import InitiationClassifier
+from skillchain_torch.options.logistic import logistic_sweeps
 from skillchain_torch.options.q_head import (
     FourierOptionQHead,
     MLPOptionQHead,
@@ -43,6 +47,8 @@ __all__ = [
     "OptionStatus",
     "RegionEvent",
     "TerminationPredicate",
+    "logistic_sweeps",
     "reservoir_uniform",
     "slot_mask",
+    "store_places",
 ]

@@ -28,25 +28,12 @@ from torch import Tensor, nn
 
 from skillchain_torch.features import PolynomialFeatures
 from skillchain_torch.invariant import rowwise_dot, rowwise_sum
+from skillchain_torch.options.examples import REPLACEMENTS, store_places
+from skillchain_torch.options.logistic import logistic_sweeps
 from skillchain_torch.options.q_head import _DTYPES, OBS_DIM, dtype_name
 from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask, slot_mask
-from skillchain_torch.rng import GOLDEN_GAMMA, logical_rshift, splitmix64, stream_key
 
-_RESERVOIR_STREAM = stream_key(0x1417)
 _POINTS_CHUNK = 8192  # points per membership evaluation (bounds the [N, M] distance matrix)
-REPLACEMENTS = ("reservoir", "ring")
-
-
-def reservoir_uniform(seed: Tensor, slot: Tensor, generation: Tensor, index: Tensor) -> Tensor:
-    """A uniform in [0, 1) that is a pure function of ``(seed, slot, generation, index)``.
-
-    Stateless hashing (SplitMix64 chained over the four integers) rather than a counter: the
-    draw for an agent's ``index``-th example of a slot never depends on other agents or slots.
-    """
-    key = splitmix64(seed ^ _RESERVOIR_STREAM)
-    key = splitmix64(key + slot * GOLDEN_GAMMA)
-    key = splitmix64(key + generation * GOLDEN_GAMMA)
-    return logical_rshift(splitmix64(key + index * GOLDEN_GAMMA), 11).to(torch.float64) * 2.0**-53
 
 
 class InitiationClassifier(nn.Module):
@@ -276,34 +263,12 @@ class InitiationClassifier(nn.Module):
         if n == 0:
             return touched.reshape(self.population, self.slots)
         flat = p * self.slots + k
-        # Rank of each example among the earlier ones of its slot (stable: insertion order).
-        sorted_flat, order = torch.sort(flat, stable=True)
-        arange = torch.arange(n, device=device)
-        start = torch.ones(n, dtype=torch.bool, device=device)
-        start[1:] = sorted_flat[1:] != sorted_flat[:-1]
-        first = torch.cummax(torch.where(start, arange, torch.zeros_like(arange)), 0).values
-        rank = torch.empty_like(arange)
-        rank[order] = arange - first
-        index = self.seen.reshape(-1)[flat] + rank  # the example's number in its slot's history
-        cap = self.capacity
-        if self.replacement == "ring":
-            position = index % cap
-        else:
-            u = reservoir_uniform(self.seeds[p], k, self.generation[p, k], index)
-            draw = torch.minimum(torch.floor(u * (index + 1).to(u.dtype)).to(torch.int64), index)
-            position = torch.where(index < cap, index, torch.where(draw < cap, draw, -1))
-        # Later examples overwrite earlier ones at the same place, as a sequential loop would:
-        # of the examples written to one place, keep the last (a stable sort over the few
-        # new examples, not a buffer the size of the stores).
-        placed = (position >= 0).nonzero()[:, 0]
-        cell, order = torch.sort(flat[placed] * cap + position[placed], stable=True)
-        last = torch.ones_like(cell, dtype=torch.bool)
-        last[:-1] = cell[1:] != cell[:-1]
-        keep, cell = placed[order[last]], cell[last]
+        cell, keep = store_places(flat, self.seen.reshape(-1), self.seeds[p], k,
+                                  self.generation[p, k], self.capacity, self.replacement)
         self.examples.view(-1, OBS_DIM)[cell] = obs[keep].to(self.examples.dtype)
         self.labels.view(-1)[cell] = labels[keep].to(device).to(torch.bool)
         self.seen.view(-1).index_add_(0, flat, torch.ones_like(flat))
-        self.count.copy_(torch.clamp(self.seen, max=cap))
+        self.count.copy_(torch.clamp(self.seen, max=self.capacity))
         touched[flat] = True
         touched = touched.reshape(self.population, self.slots)
         self.dirty |= touched
@@ -351,49 +316,18 @@ class InitiationClassifier(nn.Module):
         return torch.exp2(exponent).to(count.dtype).clamp(max=self.capacity)
 
     def _fit_slots(self, pi: Tensor, ki: Tensor, length: int) -> None:
-        """``sweeps`` full-batch gradient steps on slots ``(pi, ki)`` over ``length`` examples.
-
-        Written for few tensor operations per sweep (six calls): the bias rides as a last weight
-        on a constant feature, each example's step ``lr * its weight in the mean`` (0 for
-        empty places) is folded in once, and the loop carries the negated parameters ``v``
-        so that ``exp(x . v)`` is ``exp(-z)``: a sweep is ``g = s / (1 + exp(x . v)) - s y``
-        (``= lr * weight * (sigmoid(z) - y)``), ``v += sum_l x_l g_l``.
-        """
-        x = self.phi(self.examples[pi, ki, :length])  # [M, L, F]
-        x = torch.cat([x, torch.ones_like(x[..., :1])], dim=-1)  # [M, L, F + 1]
-        xt = x.transpose(1, 2).contiguous()  # [M, F + 1, L] to reduce over the examples
-        y = self.labels[pi, ki, :length].to(x.dtype)
+        """``sweeps`` gradient steps (:func:`logistic_sweeps`) on slots ``(pi, ki)`` over their
+        first ``length`` stored places."""
         count = self.count[pi, ki]
-        stored = torch.arange(length, device=x.device) < count[:, None]
-        zero = torch.zeros((), dtype=x.dtype, device=x.device)
-        if self.balanced:  # each example weighs 1 / (2 * its class's count)
-            positives = rowwise_sum(torch.where(stored, y, zero))
-            negatives = count.to(x.dtype) - positives
-            weight = torch.where(y > 0, 0.5 / positives.clamp(min=1.0)[:, None],
-                                 0.5 / negatives.clamp(min=1.0)[:, None])  # fmt: skip
-        else:  # the plain mean
-            weight = (1.0 / count.to(x.dtype))[:, None].expand_as(y)
-        step = torch.where(stored, self.lr * weight, zero)  # [M, L]
-        step_y = step * y
-        v = -torch.cat([self.weight[pi, ki], self.bias[pi, ki, None]], dim=-1)  # [M, F + 1]
-        # A sweep is a handful of calls on small tensors, so it is written as few calls as
-        # possible, into buffers made once: the same arithmetic as
-        #   g = step / (1 + exp((x * v).sum(-1))) - step_y;  v = v + (xt * g).sum(-1)
-        # (vecdot is that product and sum; addcdiv adds -step_y to step / (...), which is
-        # the same subtraction).
-        minus_step_y = -step_y
-        z, g, dv = torch.empty_like(step), torch.empty_like(step), torch.empty_like(v)
-        v_row, g_row = v.view(v.shape[0], 1, -1), g.view(g.shape[0], 1, -1)
-        for _ in range(self.sweeps):
-            torch.linalg.vecdot(x, v_row, out=z)  # x . v = -logit, [M, L]
-            z.exp_().add_(1.0)
-            torch.addcdiv(minus_step_y, step, z, out=g)
-            torch.linalg.vecdot(xt, g_row, out=dv)  # sum over the examples, [M, F + 1]
-            v.add_(dv)
-        # Each sum above reduces a contiguous last dim with more than one row, so every row is
-        # summed alone in a fixed order (see skillchain_torch.invariant).
-        self.weight[pi, ki] = -v[:, :-1]
-        self.bias[pi, ki] = -v[:, -1]
+        params = logistic_sweeps(
+            self.phi(self.examples[pi, ki, :length]),
+            self.labels[pi, ki, :length],
+            torch.arange(length, device=count.device) < count[:, None],
+            torch.cat([self.weight[pi, ki], self.bias[pi, ki, None]], dim=-1),
+            self.lr, self.sweeps, self.balanced,
+        )  # fmt: skip
+        self.weight[pi, ki] = params[:, :-1]
+        self.bias[pi, ki] = params[:, -1]
 
     # ----------------------------------------------------------------------------- slots
     def constrain(self, mask: Tensor) -> None:

@@ -16,8 +16,9 @@ def rand(shape, seed):
     return torch.rand(shape, dtype=F64, generator=torch.Generator().manual_seed(seed))
 
 
-def test_doctest():
-    module = importlib.import_module("skillchain_torch.options.initiation")
+@pytest.mark.parametrize("name", ["initiation", "logistic", "examples"])
+def test_doctest(name):
+    module = importlib.import_module(f"skillchain_torch.options.{name}")
     assert doctest.testmod(module).failed == 0
 
 
