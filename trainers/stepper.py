@@ -3,9 +3,11 @@
 :meth:`PinballEnv.step_raw` steps every environment of the batch. Once most agents of a
 population have finished their episodes that wastes most of a step, so the trainer steps the
 *active* environments only, in compact rows (row ``i`` is environment ``index[i]``), through the
-same pure physics the env uses (:func:`~skillchain_torch.envs.pinball.pinball_step`, or
+same pure physics the env uses: on the CPU in float64 the compiled step
+(:mod:`~skillchain_torch.envs.pinball.native`, one call for all active balls, writing the
+observations too); without it :func:`~skillchain_torch.envs.pinball.pinball_step`, or
 :func:`~skillchain_torch.envs.pinball.scalar.step_one` one ball at a time in Python floats for
-small active sets on the CPU, where torch's per-operation overhead would dominate). Both paths
+small active sets, where torch's per-operation overhead would dominate. All paths
 are bit-identical to ``step_raw`` ball by ball, so an environment's trajectory does not depend on
 which others are active (``tests/trainers/test_stepper.py`` checks it against ``step_raw``).
 
@@ -25,6 +27,7 @@ from array import array
 import torch
 from torch import Tensor
 
+from skillchain_torch.envs.pinball import native as _native
 from skillchain_torch.envs.pinball import observation, pinball_step
 from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
 
@@ -41,8 +44,10 @@ class ActiveEnvStepper:
 
     Args:
         env: a ``PinballEnv`` with ``batch_size=[P]``.
-        scalar_max: use the Python-float physics while at most this many rows are active
-            (CPU and float64 only).
+        scalar_max: without the compiled step, use the Python-float physics while at most
+            this many rows are active (CPU and float64 only).
+        native: use the compiled step (default: whenever it is built and the env is on the
+            CPU in float64). ``False`` selects the Python paths (tests compare them).
 
     Example:
         >>> from skillchain_torch.envs.pinball.env import PinballEnv
@@ -54,14 +59,23 @@ class ActiveEnvStepper:
         ([-5.0, -1.0, -5.0], None)
     """
 
-    def __init__(self, env, scalar_max: int = SCALAR_MAX):
+    def __init__(self, env, scalar_max: int = SCALAR_MAX, native: bool | None = None):
         self.env = env
         self.population = int(env.num_envs)
         self.max_episode_steps = env.max_episode_steps
         self.pinball_map = env.pinball_map
         self._sim = env._sim
         self._device = self._sim.state.device
-        self._scalar_ok = self._device.type == "cpu" and env.dtype == torch.float64
+        cpu64 = self._device.type == "cpu" and env.dtype == torch.float64
+        if native is None:
+            native = cpu64 and _native.AVAILABLE
+        if native and not (cpu64 and _native.AVAILABLE):
+            raise ValueError(
+                "native=True needs the compiled step (built: "
+                f"{_native.AVAILABLE}) and a CPU float64 env (got {self._device}, {env.dtype})"
+            )
+        self._native = _native.native_board(self.pinball_map) if native else None
+        self._scalar_ok = cpu64 and self._native is None
         self.scalar_max = int(scalar_max)
         self.index = torch.arange(self.population, device=self._device)
         self._state = self._sim.state.clone()  # [n, 4] (batched mode)
@@ -117,6 +131,8 @@ class ActiveEnvStepper:
         ``ends`` is ``None`` when no episode ended, else ``(terminated, truncated)``, bool
         tensors ``[n]`` (truncated only where ``max_episode_steps`` is reached without the goal).
         """
+        if self._native is not None:
+            return self._step_native(action)
         if self._rows is not None:
             return self._step_scalar(action)
         state, reward, terminated = pinball_step(self._state, action, self.pinball_map)
@@ -132,6 +148,28 @@ class ActiveEnvStepper:
         if truncated is None:
             truncated = torch.zeros_like(terminated)
         return observation(state), reward, (terminated, truncated)
+
+    def _step_native(self, action: Tensor):
+        state = self._state
+        if not state.is_contiguous():
+            state = self._state = state.contiguous()
+        n = state.shape[0]
+        # Observations and rewards in one fresh block (callers may keep them); the state itself
+        # is stepped in place, since only this object holds it.
+        out = torch.empty(5 * n, dtype=torch.float64)
+        obs, reward = out[: 4 * n].view(n, 4), out[4 * n :]
+        terminated = torch.empty(n, dtype=torch.bool)
+        action = action.to(torch.long).contiguous()
+        n_goal = self._native.step_into(state, action, reward, terminated, obs)
+        self._count += 1
+        if self.max_episode_steps is None:
+            if n_goal == 0:
+                return obs, reward, None
+            return obs, reward, (terminated, torch.zeros_like(terminated))
+        truncated = (self._count >= self.max_episode_steps) & ~terminated
+        if n_goal == 0 and not bool(truncated.any()):
+            return obs, reward, None
+        return obs, reward, (terminated, truncated)
 
     def _step_scalar(self, action: Tensor):
         board, rows, out = self._board, self._rows, []

@@ -36,6 +36,7 @@ import math
 
 import torch
 
+from . import native
 from .grid import collision_grid
 from .maps import PinballMap
 from .scalar import scalar_board, step_one, substeps
@@ -48,6 +49,9 @@ SUBSTEPS = 20
 # Up to this many balls on the CPU, stepping them one by one in Python floats beats torch's
 # per-operation overhead (benchmarks/env_throughput.py measures the crossover).
 SCALAR_MAX_BATCH = 4
+# On the CPU in float64, every batch goes through the compiled step when it was built
+# (native.py: the same bits, ~0.3 us a ball). Tests switch it off to check the other paths.
+NATIVE = native.AVAILABLE
 # After the first vectorised pass, at most this many balls with further events are finished in
 # plain floats rather than by more tensor passes (CPU only).
 CONTINUE_MAX_BALLS = 32
@@ -177,8 +181,11 @@ _INT_DTYPES = (torch.int64, torch.int32, torch.int16, torch.int8, torch.uint8)
 
 
 def _step(state, action, pinball_map, with_events: bool, scalar_max_batch: int | None = None):
+    on_cpu64 = state.device.type == "cpu" and state.dtype == torch.float64
+    if NATIVE and on_cpu64 and scalar_max_batch is None:
+        return _step_native(state, action, pinball_map)
     limit = SCALAR_MAX_BATCH if scalar_max_batch is None else scalar_max_batch
-    if state.shape[0] <= limit and state.device.type == "cpu" and state.dtype == torch.float64:
+    if state.shape[0] <= limit and on_cpu64:
         _check_structure(state, action, pinball_map)
         return _step_scalar(state, action, pinball_map)
     check_inputs(state, action, pinball_map)
@@ -209,6 +216,20 @@ def _step(state, action, pinball_map, with_events: bool, scalar_max_batch: int |
     next_state = torch.cat([next_p, next_v], dim=-1)
     penalty = torch.where(action == NUM_ACTIONS - 1, NONE_PENALTY, THRUST_PENALTY)
     reward = torch.where(terminated, GOAL_REWARD, penalty).to(state.dtype)
+    return next_state, reward, terminated, events
+
+
+def _step_native(state, action, pinball_map):
+    """CPU float64 batches of any size through the compiled step (bit-identical, native.py)."""
+    _check_structure(state, action, pinball_map)
+    n = state.shape[0]
+    next_state = state.contiguous().clone()
+    reward = torch.empty(n, dtype=torch.float64)
+    terminated = torch.empty(n, dtype=torch.bool)
+    events = torch.empty(n, 4, dtype=torch.long)
+    board = native.native_board(pinball_map)
+    action = action.to(torch.long).contiguous()
+    board.step_into(next_state, action, reward, terminated, None, events)
     return next_state, reward, terminated, events
 
 

@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 import torch
 
-from skillchain_torch.envs.pinball import load_map, physics, pinball_step, pinball_step_events
+from skillchain_torch.envs.pinball import (
+    load_map,
+    native,
+    physics,
+    pinball_step,
+    pinball_step_events,
+)
 
 VECTOR_FILES = [
     "pinball_simple_single_uniform_s0_k0_stop.npz",
@@ -15,16 +21,19 @@ VECTOR_FILES = [
 ]
 
 
-@pytest.fixture(params=["scalar", "batched"])
+@pytest.fixture(params=["native", "scalar", "batched"])
 def path(request, monkeypatch):
-    """Run a test through the plain-float path for tiny batches and through the tensor path."""
+    """Run a test through the compiled step, the plain-float path and the tensor path."""
+    if request.param == "native" and not native.AVAILABLE:
+        pytest.skip("the compiled step was not built (no C compiler at install time)")
+    monkeypatch.setattr(physics, "NATIVE", request.param == "native")
     monkeypatch.setattr(physics, "SCALAR_MAX_BATCH", 10**9 if request.param == "scalar" else 0)
     return request.param
 
 
 @pytest.mark.parametrize("name", VECTOR_FILES)
-def test_reproduces_java_trajectory(name, vectors_dir, monkeypatch):
-    """One ball through the plain-float path (what a batch of one runs)."""
+def test_reproduces_java_trajectory(name, vectors_dir, path):
+    """One ball through each path."""
     ref = np.load(vectors_dir / name)
     m = load_map(str(ref["config"]))
     state = torch.tensor(ref["states"][:1])
@@ -45,6 +54,7 @@ def test_reproduces_java_trajectory(name, vectors_dir, monkeypatch):
 @pytest.mark.parametrize("config", ["pinball_simple_single", "pinball_hard_single"])
 def test_reproduces_java_trajectories_as_one_batch(config, vectors_dir, monkeypatch):
     """The tensor path: a map's files stepped together (each ball idles once its file ends)."""
+    monkeypatch.setattr(physics, "NATIVE", False)
     monkeypatch.setattr(physics, "SCALAR_MAX_BATCH", 0)
     refs = [np.load(vectors_dir / n) for n in VECTOR_FILES if n.startswith(config + "_")]
     m = load_map(config)
@@ -62,7 +72,7 @@ def test_reproduces_java_trajectories_as_one_batch(config, vectors_dir, monkeypa
     "map_name",
     ["pinball_simple_single", "pinball_hard_two_starts", "pinball_medium", "pinball_box"],
 )
-def test_scalar_and_batched_paths_are_bit_identical(map_name):
+def test_native_scalar_and_batched_paths_are_bit_identical(map_name):
     """A ball's trajectory does not depend on the batch it is in (population contract)."""
     m = load_map(map_name)
     gen = torch.Generator().manual_seed(7)
@@ -86,6 +96,11 @@ def test_scalar_and_batched_paths_are_bit_identical(map_name):
         scalar = physics._step(state, action, m, True, scalar_max_batch=batch)
         for x, y in zip(batched, scalar):
             assert torch.equal(x, y)
+        if native.AVAILABLE:  # the compiled step, whole batch and one ball
+            for x, y in zip(batched, physics._step_native(state, action, m)):
+                assert torch.equal(x, y)
+            for x, y in zip(batched, physics._step_native(state[5:6], action[5:6], m)):
+                assert torch.equal(x[5:6], y)
         for k, i in enumerate(range(0, batch, 13)):
             for x, y in zip(batched, alone[k]):
                 assert torch.equal(x[i : i + 1], y)
@@ -160,7 +175,7 @@ def test_rewards_and_clip(path):
         ([[0.5, 0.5, 0.0]], [0], r"shape \[B, 4\]"),
     ],
 )
-def test_bad_input_raises(state, action, match):
+def test_bad_input_raises(state, action, match, path):
     with pytest.raises(ValueError, match=match):
         pinball_step(
             torch.tensor(state, dtype=torch.float64),

@@ -5,7 +5,8 @@ import doctest
 import pytest
 import torch
 
-from skillchain_torch.envs.pinball import PinballEnv
+from skillchain_torch.envs.pinball import PinballEnv, physics
+from skillchain_torch.envs.pinball import native as native_module
 from skillchain_torch.trainers import stepper as stepper_module
 from skillchain_torch.trainers.stepper import ActiveEnvStepper
 
@@ -14,14 +15,20 @@ def test_doctests():
     assert doctest.testmod(stepper_module).failed == 0
 
 
-@pytest.mark.parametrize("scalar_max", [0, 3, 100])
+@pytest.mark.parametrize(
+    ("scalar_max", "native"), [(0, False), (3, False), (100, False), (0, native_module.AVAILABLE)]
+)
 @pytest.mark.parametrize("limit", [None, 25])
-def test_matches_step_raw_with_resets_and_compaction(scalar_max, limit):
-    """A reference env stepped in full with step_raw; the stepper drops rows as it goes."""
+def test_matches_step_raw_with_resets_and_compaction(scalar_max, native, limit, monkeypatch):
+    """A reference env stepped in full with step_raw; the stepper drops rows as it goes.
+
+    The reference steps through the tensor physics, so each stepper path is compared with it.
+    """
+    monkeypatch.setattr(physics, "NATIVE", False)
     P, map_name = 6, "pinball_box"
     ref = PinballEnv(map_name, batch_size=[P], seed=4, max_episode_steps=limit)
     env = PinballEnv(map_name, batch_size=[P], seed=4, max_episode_steps=limit)
-    stepper = ActiveEnvStepper(env, scalar_max=scalar_max)
+    stepper = ActiveEnvStepper(env, scalar_max=scalar_max, native=native)
     gen = torch.Generator().manual_seed(0)
     assert torch.equal(stepper.start(), ref.reset_raw())
     for t in range(300):

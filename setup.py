@@ -1,0 +1,19 @@
+"""Build hook for the compiled piece; everything else is in ``pyproject.toml``.
+
+* ``envs/pinball/_native.c``: the Pinball step (same bits as the Python-float physics).
+
+It is optional: without a C compiler the install still succeeds and the code falls back to
+its torch and Python paths (``skillchain_torch.envs.pinball.native.AVAILABLE``), only slower. ``-ffp-contract=off`` keeps
+the compiler from fusing multiply-adds, which would change the last bits of trajectories.
+"""
+
+from setuptools import Extension, setup
+
+FLAGS = ["-O2", "-ffp-contract=off", "-fno-fast-math"]
+
+setup(
+    ext_modules=[
+        Extension("skillchain_torch.envs.pinball._native", sources=["envs/pinball/_native.c"],
+                  extra_compile_args=FLAGS, optional=True),
+    ]
+)
