@@ -1,9 +1,11 @@
-"""Build hook for the compiled piece; everything else is in ``pyproject.toml``.
+"""Build hook for the two compiled pieces; everything else is in ``pyproject.toml``.
 
-* ``envs/pinball/_native.c``: the Pinball step (same bits as the Python-float physics).
+* ``envs/pinball/_native.c``: the Pinball step (same bits as the Python-float physics);
+* ``trainers/_sarsa_native.c``: the flat Sarsa agent's per-step arithmetic.
 
-It is optional: without a C compiler the install still succeeds and the code falls back to
-its torch and Python paths (``skillchain_torch.envs.pinball.native.AVAILABLE``), only slower. ``-ffp-contract=off`` keeps
+Both are optional: without a C compiler the install still succeeds and the code falls back to
+its torch and Python paths (``skillchain_torch.envs.pinball.native.AVAILABLE``,
+``skillchain_torch.trainers.native_sarsa.AVAILABLE``), only slower. ``-ffp-contract=off`` keeps
 the compiler from fusing multiply-adds, which would change the last bits of trajectories.
 """
 
@@ -15,5 +17,7 @@ setup(
     ext_modules=[
         Extension("skillchain_torch.envs.pinball._native", sources=["envs/pinball/_native.c"],
                   extra_compile_args=FLAGS, optional=True),
+        Extension("skillchain_torch.trainers._sarsa_native",
+                  sources=["trainers/_sarsa_native.c"], extra_compile_args=FLAGS, optional=True),
     ]
 )

@@ -18,6 +18,7 @@ Example:
 from __future__ import annotations
 
 import importlib
+import inspect
 
 __all__ = ["AGENTS", "agent_class", "make_agent"]
 
@@ -37,6 +38,13 @@ def agent_class(name: str) -> type:
     return getattr(importlib.import_module(f"{__package__}.{module}"), cls)
 
 
-def make_agent(config, device=None):
-    """Build the registered agent named ``config.agent``."""
-    return agent_class(config.agent)(config, device=device)
+def make_agent(config, device=None, native: bool | None = None):
+    """Build the registered agent named ``config.agent``.
+
+    ``native`` reaches agents whose constructor takes it (the flat agent's compiled kernels);
+    ``None`` keeps each agent's default.
+    """
+    cls = agent_class(config.agent)
+    if native is not None and "native" in inspect.signature(cls).parameters:
+        return cls(config, device=device, native=native)
+    return cls(config, device=device)

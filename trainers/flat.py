@@ -27,6 +27,8 @@ state *after* their update); ``compact(keep)`` drops agents that finished all th
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor, nn
 
@@ -37,6 +39,7 @@ from skillchain_torch.objectives import SarsaUpdate
 from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy
 from skillchain_torch.rng import CounterRNG
 
+from . import native_sarsa
 from .config import TrainConfig
 from .kernels import candidate_codes, decide, decision_table
 
@@ -52,7 +55,8 @@ class _Work:
     """Working state of the active rows (compact, row i = agent ``index[i]``)."""
 
     __slots__ = ("index", "n", "w", "w_flat", "arange", "prod", "phi", "action", "rows", "base",
-                 "j", "table", "table_rows", "explore", "u1", "step_size", "gamma", "epsilon")
+                 "j", "table", "table_rows", "explore", "u1", "step_size", "gamma", "epsilon",
+                 "gamma_float")
 
 
 class FlatSarsaAgent(nn.Module):
@@ -62,6 +66,11 @@ class FlatSarsaAgent(nn.Module):
         config: the run's :class:`TrainConfig` (``order``/``alpha`` resolved to paper values
             when ``None``); ``config.runs`` is the population P.
         device: torch device (default ``config.device``).
+        native: run the per-step arithmetic in C (:mod:`.native_sarsa`; default: when it is
+            built and the agent is on the CPU). Its Q values and updates agree with the torch
+            path to rounding, not bit for bit, so a run's bits depend on this choice (it is
+            saved with the agent's state; a checkpoint of the other kind is refused). Either
+            way agent p of a population equals the single run with seed S + p bit for bit.
 
     Example:
         >>> agent = FlatSarsaAgent(TrainConfig(runs=2, seed=0))
@@ -72,10 +81,17 @@ class FlatSarsaAgent(nn.Module):
         [2, 3]
     """
 
-    def __init__(self, config: TrainConfig, device: torch.device | str | None = None):
+    def __init__(self, config: TrainConfig, device: torch.device | str | None = None,
+                 native: bool | None = None):
         super().__init__()
         cfg = config.resolved()
         device = torch.device(cfg.device if device is None else device)
+        if native is None:
+            native = native_sarsa.AVAILABLE and device.type == "cpu"
+        if native and not (native_sarsa.AVAILABLE and device.type == "cpu"):
+            raise ValueError(f"native=True needs the compiled kernels (built: "
+                             f"{native_sarsa.AVAILABLE}) and the CPU (got {device})")
+        self.native = bool(native)
         self.config = cfg
         self.population = cfg.runs
         self.num_actions = NUM_ACTIONS
@@ -94,6 +110,7 @@ class FlatSarsaAgent(nn.Module):
         w.epsilon = torch.tensor(cfg.epsilon, dtype=torch.float64, device=device)
         w.gamma = None if cfg.gamma == 1.0 else torch.tensor(cfg.gamma, dtype=torch.float64,
                                                              device=device)
+        w.gamma_float = None if cfg.gamma == 1.0 else float(cfg.gamma)
         self._set_active(torch.arange(cfg.runs, device=device))
         w.phi = torch.zeros(cfg.runs, self.features.num_features, dtype=torch.float64,
                             device=device)
@@ -102,6 +119,8 @@ class FlatSarsaAgent(nn.Module):
     # ------------------------------------------------------------------ pieces
     def featurize(self, obs: Tensor) -> Tensor:
         """``FourierBasis(obs)``: ``[n, 4] -> [n, F]``."""
+        if self.native:
+            return native_sarsa.fourier_features(self.features, obs)
         return self.features(obs)
 
     def q_values(self, phi: Tensor, rows: Tensor | None = None) -> Tensor:
@@ -113,6 +132,8 @@ class FlatSarsaAgent(nn.Module):
         traffic).
         """
         w = self._work
+        if self.native:
+            return native_sarsa.linear_q(w.w, phi, rows)
         if rows is not None:
             return (w.w[:, rows] * phi[None]).sum(-1)
         if w.n < CHUNK_ROWS:
@@ -147,9 +168,13 @@ class FlatSarsaAgent(nn.Module):
         """Draw the next block of uniforms from counters ``base`` and tabulate the decisions."""
         w = self._work
         w.base, w.j = base, 0
-        if not bool(torch.isfinite(w.w).all()):
+        # One sum is non-finite if any weight is (a pass over the weights, not three); an
+        # overflowing sum of finite weights finds no bad agent and raises nothing.
+        if not math.isfinite(float(w.w.sum())):
             bad = w.index[~torch.isfinite(w.w).flatten(2).all(-1).all(0)].tolist()
-            raise FloatingPointError(f"agents {bad} have non-finite weights (alpha too large?)")
+            if bad:
+                raise FloatingPointError(
+                    f"agents {bad} have non-finite weights (alpha too large?)")
         stream = CounterRNG(self.rng.seeds[w.index], self.rng.stream, counter=base)
         block = stream.uniform(NUM_UNIFORMS * BLOCK_DECISIONS)  # u0, u1, u0, u1, ...
         w.explore = block[:, 0::2] < w.epsilon
@@ -178,6 +203,13 @@ class FlatSarsaAgent(nn.Module):
     def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
         """Learn from ``(s, a, r, s')`` for every active row (no episode ended); next actions."""
         w = self._work
+        if self.native:  # the whole step per agent row in C
+            phi1 = native_sarsa.fourier_features(self.features, obs)
+            self._next_slot()
+            a1 = native_sarsa.sarsa_observe(w.w, w.phi, phi1, w.action, reward, w.table,
+                                            w.j - 1, w.step_size, w.gamma_float)
+            w.phi, w.action, w.rows = phi1, a1, None  # rows: only the torch path reads them
+            return a1
         phi1 = self.features(obs)
         q1 = self.q_values(phi1)
         self._next_slot()
@@ -208,7 +240,7 @@ class FlatSarsaAgent(nn.Module):
                 have finished training and are dropped by the next :meth:`compact`.
         """
         w = self._work
-        phi1 = self.features(obs)
+        phi1 = self.featurize(obs)
         q1 = self.q_values(phi1)
         self._next_slot()
         a1 = self._decide_slot(q1)
@@ -217,7 +249,7 @@ class FlatSarsaAgent(nn.Module):
             # A terminated row's next decision is its start decision: it takes this step's
             # uniforms (its decision at s' above is discarded). A truncated row already used
             # them at s', so its start decision draws two more.
-            phi_start = self.features(start_obs)
+            phi_start = self.featurize(start_obs)
             q_start = self.q_values(phi_start, restart_rows)
             a_start = self._decide_slot(q_start, restart_rows)
             extra = truncated[restart_rows]
@@ -240,6 +272,11 @@ class FlatSarsaAgent(nn.Module):
     def _learn(self, reward: Tensor, q_next: Tensor, terminated: Tensor | None) -> None:
         """One Sarsa step per active row, as ``SarsaUpdate`` computes it."""
         w = self._work
+        if self.native:
+            terminated = None if terminated is None else terminated.contiguous()
+            native_sarsa.sarsa_learn(w.w, w.phi, w.action, reward.contiguous(), q_next,
+                                     terminated, w.step_size, w.gamma_float)
+            return
         w_sa = w.w_flat.index_select(0, w.rows)
         q_sa = (w_sa * w.phi).sum(-1)
         bootstrap = q_next if w.gamma is None else w.gamma * q_next  # 1.0 * x == x
@@ -306,10 +343,17 @@ class FlatSarsaAgent(nn.Module):
             "index": self.index.clone(),
             "action": action,
             "phi": phi,
+            "native": self.native,
         }
 
     def load_state_dict(self, state, strict: bool = True, assign: bool = False):
         dev = self.q_head.weight.device
+        saved = bool(state.get("native", False))
+        if saved != self.native:
+            raise ValueError(
+                f"this state was saved by a {'native' if saved else 'torch'}-kernel agent, and "
+                f"this agent uses the {'native' if self.native else 'torch'} kernels, whose "
+                "rounding differs: resume with the same kind (native=...)")
         self.q_head.load_state_dict(state["q_head"])
         self.rng.load_state_dict(state["rng"])
         self.rng.to(dev)
@@ -322,4 +366,5 @@ class FlatSarsaAgent(nn.Module):
     def extra_repr(self) -> str:
         cfg = self.config
         return (f"population={self.population}, order={cfg.order}, alpha={cfg.alpha}, "
-                f"gamma={cfg.gamma}, epsilon={cfg.epsilon}, active={int(self._work.index.numel())}")
+                f"gamma={cfg.gamma}, epsilon={cfg.epsilon}, "
+                f"active={int(self._work.index.numel())}, native={self.native}")

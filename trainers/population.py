@@ -67,7 +67,12 @@ class PopulationTrainer:
     Args:
         config: the run (validated; ``order``/``alpha`` resolved to the paper's values).
         out_dir: where checkpoints go (``out_dir/checkpoints``); ``None``: no checkpoints.
-        scalar_max: active-set size up to which the physics runs in Python floats.
+        scalar_max: without the compiled step, the active-set size up to which the physics
+            runs in Python floats.
+        native: the compiled code (default: when built, on the CPU): the Pinball step, which
+            gives the same bits as the Python paths (:class:`ActiveEnvStepper`), and the flat
+            agent's kernels, which agree with its torch path to rounding
+            (:class:`~.flat.FlatSarsaAgent`). ``False`` runs torch and Python only.
         num_threads: torch intra-op threads while :meth:`train` runs (restored afterwards);
             ``None`` keeps torch's setting. Default 1: the per-step tensors are small, and a
             parallel region waits for a busy core (10x slowdowns on a shared machine).
@@ -81,7 +86,8 @@ class PopulationTrainer:
     """
 
     def __init__(self, config: TrainConfig, out_dir: str | Path | None = None,
-                 scalar_max: int = SCALAR_MAX, num_threads: int | None = 1):
+                 scalar_max: int = SCALAR_MAX, num_threads: int | None = 1,
+                 native: bool | None = None):
         config = config.resolved().validate()
         self.config = config
         self.out_dir = None if out_dir is None else Path(out_dir)
@@ -90,8 +96,8 @@ class PopulationTrainer:
         self.env = PinballEnv(config.map, batch_size=[config.runs], device=self.device,
                               dtype=torch.float64, max_episode_steps=config.max_episode_steps,
                               seed=config.seed)
-        self.stepper = ActiveEnvStepper(self.env, scalar_max=scalar_max)
-        self.agent = make_agent(config, device=self.device)
+        self.stepper = ActiveEnvStepper(self.env, scalar_max=scalar_max, native=native)
+        self.agent = make_agent(config, device=self.device, native=native)
         P, E = config.runs, config.episodes
         self.returns = np.full((P, E), np.nan)
         self.lengths = np.zeros((P, E), dtype=np.int64)

@@ -1,4 +1,8 @@
-"""FlatSarsaAgent's fast path equals the library pieces bit for bit."""
+"""FlatSarsaAgent's fast paths against the library pieces.
+
+The torch path equals them bit for bit. The compiled path (native_sarsa, when built) takes the
+same decisions and its weights agree to rounding: its dot products sum in their own order.
+"""
 
 import doctest
 import importlib
@@ -11,11 +15,19 @@ from skillchain_torch.modules import LinearQHead
 from skillchain_torch.objectives import SarsaUpdate
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
-from skillchain_torch.trainers import FlatSarsaAgent, TrainConfig
+from skillchain_torch.trainers import FlatSarsaAgent, TrainConfig, native_sarsa
 from skillchain_torch.trainers.flat import BLOCK_DECISIONS
 from skillchain_torch.trainers.kernels import candidate_codes, decision_table
 
 F64 = torch.float64
+KERNELS = [False, True] if native_sarsa.AVAILABLE else [False]
+
+
+def _same_weights(native, got, expected):
+    if native:  # own summation order: equal to rounding, and not bit for bit by design
+        torch.testing.assert_close(got, expected, rtol=1e-10, atol=1e-10)
+    else:
+        assert torch.equal(got, expected)
 
 
 def test_doctests():
@@ -24,10 +36,12 @@ def test_doctests():
         assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 
 
+@pytest.mark.parametrize("native", KERNELS)
 @pytest.mark.parametrize("order", [0, 1, 3, 4, 5])
 @pytest.mark.parametrize("n", [1, 2, 3, 7, 100])
-def test_featurize_equals_fourier_basis(order, n):
-    agent = FlatSarsaAgent(TrainConfig(runs=1, order=order))
+def test_featurize_equals_fourier_basis(order, n, native):
+    """Both paths give FourierBasis's features bit for bit."""
+    agent = FlatSarsaAgent(TrainConfig(runs=1, order=order), native=native)
     gen = torch.Generator().manual_seed(order * 1000 + n)
     # observations, including velocity parts outside [0, 1] after reflections
     obs = torch.rand(n, 4, dtype=F64, generator=gen) * 1.5 - 0.25
@@ -59,13 +73,14 @@ def _reference_step(head, update, phi, a, r, next_phi, next_a, terminal):
     return update(head, phi, a, r, torch.ones_like(a), next_phi, next_a, terminal)
 
 
+@pytest.mark.parametrize("native", KERNELS)
 @pytest.mark.parametrize(("gamma", "scale", "P"),
                          [(1.0, False, 4), (0.9, False, 4), (1.0, True, 4), (1.0, False, 20)])
-def test_observe_equals_library_pipeline(gamma, scale, P):
+def test_observe_equals_library_pipeline(gamma, scale, P, native):
     """Run the agent's hot path and the library pieces side by side on random transitions."""
     cfg = TrainConfig(runs=P, seed=5, gamma=gamma, scale_step_size=scale, alpha=0.05,
                       epsilon=0.2)
-    agent = FlatSarsaAgent(cfg)
+    agent = FlatSarsaAgent(cfg, native=native)
     basis = FourierBasis(4, 4)
     head = LinearQHead(basis.num_features, 5, P)
     update = SarsaUpdate(0.05, gamma, basis.step_size_scale() if scale else None)
@@ -91,16 +106,17 @@ def test_observe_equals_library_pipeline(gamma, scale, P):
         assert torch.equal(got, next_a)
         phi, a = next_phi, next_a
     agent.flush()
-    assert torch.equal(agent.q_head.weight, head.weight)
+    _same_weights(native, agent.q_head.weight, head.weight)
     assert torch.equal(agent.rng.counter, rng.counter)
 
 
-def test_terminal_and_truncated_updates_with_restarts():
+@pytest.mark.parametrize("native", KERNELS)
+def test_terminal_and_truncated_updates_with_restarts(native):
     """observe_ends: terminated rows do not bootstrap and decide at their start state after
     the update; truncated rows bootstrap from s' and draw two more uniforms to restart."""
     P = 3
     cfg = TrainConfig(runs=P, seed=9, alpha=0.05, epsilon=0.3)
-    agent = FlatSarsaAgent(cfg)
+    agent = FlatSarsaAgent(cfg, native=native)
     basis = FourierBasis(4, 4)
     head = LinearQHead(basis.num_features, 5, P)
     update = SarsaUpdate(0.05, 1.0)
@@ -139,13 +155,14 @@ def test_terminal_and_truncated_updates_with_restarts():
         assert torch.equal(got, a_after), step
         phi, a = phi_after, a_after
     agent.flush()
-    assert torch.equal(agent.q_head.weight, head.weight)
+    _same_weights(native, agent.q_head.weight, head.weight)
     assert agent.rng.counter.tolist() == [int(r.counter[0]) for r in rngs]
 
 
-def test_compact_and_state_dict_round_trip():
+@pytest.mark.parametrize("native", KERNELS)
+def test_compact_and_state_dict_round_trip(native):
     cfg = TrainConfig(runs=4, seed=1)
-    agent = FlatSarsaAgent(cfg)
+    agent = FlatSarsaAgent(cfg, native=native)
     obs = torch.rand(4, 4, dtype=F64, generator=torch.Generator().manual_seed(0))
     agent.begin(obs)
     agent.observe(obs, torch.full((4,), -1.0, dtype=F64))
@@ -153,7 +170,7 @@ def test_compact_and_state_dict_round_trip():
     assert agent.index.tolist() == [0, 2]
     state = agent.state_dict()
     assert state["action"][1] == -1 and state["action"][3] == -1
-    other = FlatSarsaAgent(cfg)
+    other = FlatSarsaAgent(cfg, native=native)
     other.load_state_dict(state)
     reward = torch.full((2,), -5.0, dtype=F64)
     assert torch.equal(agent.observe(obs[:2], reward), other.observe(obs[:2], reward))
@@ -167,3 +184,26 @@ def test_diverging_weights_raise_a_clear_error():
     trainer = PopulationTrainer(TrainConfig(runs=2, alpha=1e3, episodes=1))
     with pytest.raises(FloatingPointError, match=r"agents \[0, 1\] have non-finite weights"):
         trainer.train()
+
+
+@pytest.mark.skipif(not native_sarsa.AVAILABLE, reason="the compiled kernels were not built")
+def test_state_of_the_other_kernel_is_refused():
+    """The two kernels round differently, so a resumed run must keep its kernel."""
+    cfg = TrainConfig(runs=2, seed=1)
+    state = FlatSarsaAgent(cfg, native=True).state_dict()
+    with pytest.raises(ValueError, match="saved by a native-kernel agent"):
+        FlatSarsaAgent(cfg, native=False).load_state_dict(state)
+
+
+@pytest.mark.skipif(not native_sarsa.AVAILABLE, reason="the compiled kernels were not built")
+def test_native_q_values_agree_with_linear_q_head():
+    gen = torch.Generator().manual_seed(4)
+    w = torch.randn(5, 7, 625, dtype=F64, generator=gen)
+    phi = torch.rand(3, 625, dtype=F64, generator=gen)
+    rows = torch.tensor([6, 0, 3])
+    expected = (w[:, rows] * phi[None]).sum(-1)
+    torch.testing.assert_close(native_sarsa.linear_q(w, phi, rows), expected,
+                               rtol=1e-13, atol=1e-12)
+    # and not by accident: a row's value does not depend on the other rows asked for
+    assert torch.equal(native_sarsa.linear_q(w, phi[1:2], rows[1:2]),
+                       native_sarsa.linear_q(w, phi, rows)[:, 1:2])

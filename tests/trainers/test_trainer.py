@@ -10,9 +10,9 @@ import torch
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
 
-def _run(runs, seed, scalar_max=128, **kwargs):
+def _run(runs, seed, scalar_max=128, native=None, **kwargs):
     cfg = TrainConfig(map="pinball_box", runs=runs, seed=seed, **kwargs)
-    return PopulationTrainer(cfg, scalar_max=scalar_max).train()
+    return PopulationTrainer(cfg, scalar_max=scalar_max, native=native).train()
 
 
 def test_doctests():
@@ -22,18 +22,19 @@ def test_doctests():
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "scalar_max"),
+    ("kwargs", "scalar_max", "native"),
     [
-        (dict(episodes=3, max_episode_steps=500), 128),  # goals and truncations
-        (dict(episodes=3, max_episode_steps=500), 0),  # the batched physics for P = 3
-        (dict(episodes=2), 128),  # terminations only
-        (dict(episodes=2, gamma=0.99, epsilon=0.2, order=3, scale_step_size=True), 128),
+        (dict(episodes=3, max_episode_steps=500), 128, None),  # goals and truncations
+        (dict(episodes=3, max_episode_steps=500), 128, False),  # Python-float physics
+        (dict(episodes=3, max_episode_steps=500), 0, False),  # the tensor physics for P = 3
+        (dict(episodes=2), 128, None),  # terminations only
+        (dict(episodes=2, gamma=0.99, epsilon=0.2, order=3, scale_step_size=True), 128, None),
     ],
 )
-def test_agent_p_equals_single_run_with_seed_s_plus_p(kwargs, scalar_max):
-    together = _run(3, seed=10, scalar_max=scalar_max, **kwargs)
+def test_agent_p_equals_single_run_with_seed_s_plus_p(kwargs, scalar_max, native):
+    together = _run(3, seed=10, scalar_max=scalar_max, native=native, **kwargs)
     for p in range(3):
-        alone = _run(1, seed=10 + p, **kwargs)
+        alone = _run(1, seed=10 + p, native=native, **kwargs)
         assert np.array_equal(together.returns[p], alone.returns[0])
         assert np.array_equal(together.lengths[p], alone.lengths[0])
         assert torch.equal(together.weights[p], alone.weights[0])

@@ -1,0 +1,202 @@
+/* The flat Sarsa agent's per-step arithmetic, compiled (see native_sarsa.py).
+ *
+ * Why it exists: at P = 100 the torch fast path makes ~20 passes over [P, 625] arrays a step
+ * (products, sums, gathers, scatters), and at P = 1 it pays ~30 operations of a few
+ * microseconds each. Here each agent's row is one pass: its Q values, its epsilon-greedy
+ * lookup, its Sarsa update.
+ *
+ * Arithmetic: features' arguments pi * (c . x) are formed exactly as FourierBasis forms them
+ * (x_j * c_j added left to right, then times pi), so after torch's cos the features are the
+ * same bits. Dot products use eight interleaved partial sums in a fixed order, so they are
+ * deterministic and do not depend on the batch, the alignment or the other agents; they differ
+ * from torch's (w * phi).sum(-1) in the last bits (its summation order is its own). The update
+ * keeps SarsaUpdate's expression: w[a] += step * (delta * phi), delta = (r + gamma q') - q.
+ * Compiled with -ffp-contract=off: no fused multiply-adds.
+ *
+ * Every array argument is an address (torch.Tensor.data_ptr()); all arrays are contiguous.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+
+#define MAX_DECISIONS 16
+
+static double dot(const double *a, const double *b, long n)
+{
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, s4 = 0.0, s5 = 0.0, s6 = 0.0, s7 = 0.0;
+    long f = 0;
+    for (; f + 8 <= n; f += 8) {
+        s0 += a[f] * b[f];
+        s1 += a[f + 1] * b[f + 1];
+        s2 += a[f + 2] * b[f + 2];
+        s3 += a[f + 3] * b[f + 3];
+        s4 += a[f + 4] * b[f + 4];
+        s5 += a[f + 5] * b[f + 5];
+        s6 += a[f + 6] * b[f + 6];
+        s7 += a[f + 7] * b[f + 7];
+    }
+    double tail = 0.0;
+    for (; f < n; f++) tail += a[f] * b[f];
+    return (((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7))) + tail;
+}
+
+/* Bit code of the greedy decisions (q == max q); 0 when any value is NaN (as torch's amax). */
+static long greedy_code(const double *q, long d_count)
+{
+    double m = q[0];
+    for (long d = 1; d < d_count; d++)
+        if (q[d] > m || isnan(q[d])) m = q[d];
+    if (isnan(m)) return 0;
+    long code = 0;
+    for (long d = 0; d < d_count; d++)
+        if (q[d] == m) code |= 1L << d;
+    return code;
+}
+
+/* w[a] += step * (delta * phi), delta = (r + boot) - w[a] . phi */
+static void learn_row(double *wa, const double *phi, long F, double reward, double q_next,
+                      int terminal, const double *step, long step_stride, double gamma,
+                      int use_gamma)
+{
+    double q_sa = dot(wa, phi, F);
+    double boot = terminal ? 0.0 : (use_gamma ? gamma * q_next : q_next);
+    double delta = (reward + boot) - q_sa;
+    for (long f = 0; f < F; f++) wa[f] += step[f * step_stride] * (delta * phi[f]);
+}
+
+/* The arguments of row i in FourierBasis's order: the partial sums (x_0 c_0 + x_1 c_1) + ... are
+ * shared by all coefficient vectors with the same leading entries, last dimension fastest. */
+static double *fourier_row(const double *t, long dim, long k, long j, double acc, double pi,
+                           double *o)
+{
+    const double *tj = t + j * k;
+    if (j == dim - 1) { /* the last dimension: k outputs in one tight loop */
+        if (j == 0)
+            for (long c = 0; c < k; c++) o[c] = pi * tj[c];
+        else
+            for (long c = 0; c < k; c++) o[c] = pi * (acc + tj[c]);
+        return o + k;
+    }
+    for (long c = 0; c < k; c++)
+        o = fourier_row(t, dim, k, j + 1, j == 0 ? tj[c] : acc + tj[c], pi, o);
+    return o;
+}
+
+/* fourier_args(n, dim, order, x, x_stride0, x_stride1, pi, out): out[i, c] = pi * (c . x_i),
+ * with c . x = ((x_0 c_0 + x_1 c_1) + ...) and x_j c_j = x_j * (double)c_j, as FourierBasis. */
+static PyObject *fourier_args(PyObject *self, PyObject *args)
+{
+    Py_ssize_t n, dim, order, s0, s1;
+    unsigned long long x_p, out_p;
+    double pi;
+    if (!PyArg_ParseTuple(args, "nnnKnndK", &n, &dim, &order, &x_p, &s0, &s1, &pi, &out_p))
+        return NULL;
+    if (dim < 1 || dim > 16 || order < 0 || order > 63) {
+        PyErr_SetString(PyExc_ValueError, "fourier_args: need dim in 1..16 and order in 0..63");
+        return NULL;
+    }
+    const double *x = (const double *)(uintptr_t)x_p;
+    double *out = (double *)(uintptr_t)out_p;
+    long k = order + 1, F = 1;
+    for (long j = 0; j < dim; j++) F *= k;
+    double t[16 * 64];
+    for (Py_ssize_t i = 0; i < n; i++) {
+        for (long j = 0; j < dim; j++)
+            for (long c = 0; c < k; c++) t[j * k + c] = x[i * s0 + j * s1] * (double)c;
+        fourier_row(t, dim, k, 0, 0.0, pi, out + i * F);
+    }
+    Py_RETURN_NONE;
+}
+
+/* linear_q(n, D, F, w, n_rows, rows, phi, q): q[d, i] = w[d, r_i] . phi[i], with r_i = rows[i]
+ * (or i when rows is 0). w is action-major [D, n_rows, F]; q is [D, n]. */
+static PyObject *linear_q(PyObject *self, PyObject *args)
+{
+    Py_ssize_t n, D, F, n_rows;
+    unsigned long long w_p, rows_p, phi_p, q_p;
+    if (!PyArg_ParseTuple(args, "nnnKnKKK", &n, &D, &F, &w_p, &n_rows, &rows_p, &phi_p, &q_p))
+        return NULL;
+    const double *w = (const double *)(uintptr_t)w_p, *phi = (const double *)(uintptr_t)phi_p;
+    const int64_t *rows = (const int64_t *)(uintptr_t)rows_p;
+    double *q = (double *)(uintptr_t)q_p;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        long r = rows ? (long)rows[i] : (long)i;
+        for (Py_ssize_t d = 0; d < D; d++)
+            q[d * n + i] = dot(w + (d * n_rows + r) * F, phi + i * F, F);
+    }
+    Py_RETURN_NONE;
+}
+
+/* sarsa_learn(n, D, F, w, phi, action, reward, q_next, terminated, step, step_stride, gamma,
+ * use_gamma): one Sarsa update of row i's action[i] (terminated: uint8 [n] or 0). */
+static PyObject *sarsa_learn(PyObject *self, PyObject *args)
+{
+    Py_ssize_t n, D, F, step_stride;
+    unsigned long long w_p, phi_p, a_p, r_p, qn_p, t_p, step_p;
+    double gamma;
+    int use_gamma;
+    if (!PyArg_ParseTuple(args, "nnnKKKKKKKndi", &n, &D, &F, &w_p, &phi_p, &a_p, &r_p, &qn_p,
+                          &t_p, &step_p, &step_stride, &gamma, &use_gamma))
+        return NULL;
+    double *w = (double *)(uintptr_t)w_p;
+    const double *phi = (const double *)(uintptr_t)phi_p, *reward = (const double *)(uintptr_t)r_p;
+    const double *q_next = (const double *)(uintptr_t)qn_p, *step = (const double *)(uintptr_t)step_p;
+    const int64_t *action = (const int64_t *)(uintptr_t)a_p;
+    const uint8_t *terminated = (const uint8_t *)(uintptr_t)t_p;
+    for (Py_ssize_t i = 0; i < n; i++)
+        learn_row(w + (action[i] * n + i) * F, phi + i * F, F, reward[i], q_next[i],
+                  terminated ? terminated[i] : 0, step, step_stride, gamma, use_gamma);
+    Py_RETURN_NONE;
+}
+
+/* sarsa_observe(n, D, F, w, phi, phi_next, action, reward, table, table_row, slot, step,
+ * step_stride, gamma, use_gamma, next_action): for each row, Q(s', .) with the weights before
+ * this step's update, the tabulated epsilon-greedy choice a' (table[i*table_row + slot + code]),
+ * then the Sarsa update of (s, a) toward r + gamma Q(s', a'). Writes a' to next_action. */
+static PyObject *sarsa_observe(PyObject *self, PyObject *args)
+{
+    Py_ssize_t n, D, F, table_row, slot, step_stride;
+    unsigned long long w_p, phi_p, phi1_p, a_p, r_p, table_p, step_p, out_p;
+    double gamma;
+    int use_gamma;
+    if (!PyArg_ParseTuple(args, "nnnKKKKKKnnKndiK", &n, &D, &F, &w_p, &phi_p, &phi1_p, &a_p,
+                          &r_p, &table_p, &table_row, &slot, &step_p, &step_stride, &gamma,
+                          &use_gamma, &out_p))
+        return NULL;
+    if (D > MAX_DECISIONS) {
+        PyErr_SetString(PyExc_ValueError, "sarsa_observe: at most 16 decisions");
+        return NULL;
+    }
+    double *w = (double *)(uintptr_t)w_p;
+    const double *phi = (const double *)(uintptr_t)phi_p;
+    const double *phi1 = (const double *)(uintptr_t)phi1_p;
+    const double *reward = (const double *)(uintptr_t)r_p, *step = (const double *)(uintptr_t)step_p;
+    const int64_t *action = (const int64_t *)(uintptr_t)a_p;
+    const int64_t *table = (const int64_t *)(uintptr_t)table_p;
+    int64_t *next_action = (int64_t *)(uintptr_t)out_p;
+    double q[MAX_DECISIONS];
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double *p1 = phi1 + i * F;
+        for (Py_ssize_t d = 0; d < D; d++) q[d] = dot(w + (d * n + i) * F, p1, F);
+        int64_t a1 = table[i * table_row + slot + greedy_code(q, D)];
+        learn_row(w + (action[i] * n + i) * F, phi + i * F, F, reward[i], q[a1], 0, step,
+                  step_stride, gamma, use_gamma);
+        next_action[i] = a1;
+    }
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"fourier_args", fourier_args, METH_VARARGS, "pi * (c . x) for every coefficient vector."},
+    {"linear_q", linear_q, METH_VARARGS, "Action-major Q values of some rows."},
+    {"sarsa_learn", sarsa_learn, METH_VARARGS, "One Sarsa update per row."},
+    {"sarsa_observe", sarsa_observe, METH_VARARGS, "Q(s', .), the choice a', the update."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_sarsa_native",
+                                    "Compiled flat Sarsa step (see native_sarsa.py).", -1,
+                                    methods};
+
+PyMODINIT_FUNC PyInit__sarsa_native(void) { return PyModule_Create(&module); }
