@@ -9,8 +9,10 @@ on the batch size; ours steps ``B`` independent environments per call.
     python benchmarks/env_throughput.py --crossover     # scalar vs tensor path at small B
 
 Columns: ``ours`` is ``PinballEnv.step_raw`` plus ``reset_raw`` of finished environments (what
-the trainers call); ``torchrl`` is ``EnvBase.step`` with TensorDicts; ratios are against
-pynball-rl's rate measured in the same run.
+the trainers call), through the compiled step when it is built; ``no C`` is the same without
+it (Python floats for tiny batches, tensors otherwise; the same bits); ``torchrl`` is
+``EnvBase.step`` with TensorDicts; ratios are against pynball-rl's rate measured in the same
+run.
 """
 
 from __future__ import annotations
@@ -94,6 +96,7 @@ def main() -> None:
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, float64, CPU")
 
     if args.crossover:
+        physics.NATIVE = False
         print("\n| map | B | plain-float path (steps/s) | tensor path (steps/s) |")
         print("|---|---:|---:|---:|")
         for map_name in args.maps:
@@ -105,8 +108,8 @@ def main() -> None:
                 print(f"| {map_name} | {batch} | {rates[0]:,.0f} | {rates[1]:,.0f} |")
         return
 
-    header = "| map | B | ours (steps/s) | pynball-rl (steps/s) | ratio |"
-    sep = "|---|---:|---:|---:|---:|"
+    header = "| map | B | ours (steps/s) | no C (steps/s) | pynball-rl (steps/s) | ratio |"
+    sep = "|---|---:|---:|---:|---:|---:|"
     if args.torchrl:
         header += " torchrl step (steps/s) |"
         sep += "---:|"
@@ -114,10 +117,13 @@ def main() -> None:
     for map_name in args.maps:
         peer = time_pynball(map_name, 20_000)
         for batch in args.batches:
-            ours = time_ours(
-                map_name, batch, steps_for(batch, args.budget if batch > 1 else 20_000)
-            )
-            row = f"| {map_name} | {batch} | {ours:,.0f} | {peer:,.0f} | {ours / peer:.1f}x |"
+            steps = steps_for(batch, args.budget if batch > 1 else 20_000)
+            ours = time_ours(map_name, batch, steps)
+            native, physics.NATIVE = physics.NATIVE, False
+            plain = time_ours(map_name, batch, steps)
+            physics.NATIVE = native
+            row = (f"| {map_name} | {batch} | {ours:,.0f} | {plain:,.0f} | {peer:,.0f} | "
+                   f"{ours / peer:.1f}x |")
             if args.torchrl:
                 row += f" {time_torchrl(map_name, batch, steps_for(batch, 20_000)):,.0f} |"
             print(row, flush=True)

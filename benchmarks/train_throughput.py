@@ -34,17 +34,19 @@ import torch
 
 from skillchain_torch.envs.pinball import load_map
 from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
-from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+from skillchain_torch.trainers import PopulationTrainer, TrainConfig, native_sarsa
 
 MAP = "pinball_simple_single"
 
 
-def time_trainer(population: int, agent_steps: int, threads: int, repeats: int = 3) -> float:
-    """Best of ``repeats`` rates (agent steps / s) over ``agent_steps`` after a warm-up."""
+def time_trainer(population: int, agent_steps: int, threads: int, repeats: int = 3,
+                 native: bool | None = None) -> float:
+    """Best of ``repeats`` rates (agent steps / s) over ``agent_steps`` after a warm-up
+    (``native=False``: torch and Python only, without the compiled step and kernels)."""
     best = 0.0
     for r in range(repeats):
         cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=r)
-        trainer = PopulationTrainer(cfg, num_threads=threads)
+        trainer = PopulationTrainer(cfg, num_threads=threads, native=native)
         trainer.train(max_agent_steps=20 * population)  # warm-up: caches, first allocations
         start, done = time.perf_counter(), trainer.agent_steps
         trainer.train(max_agent_steps=done + agent_steps)
@@ -125,28 +127,31 @@ def skill_chaining_trainer(population: int, threads: int, seed: int = 0) -> Popu
 
 
 def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
-                options_steps: int) -> tuple[float, float, list[float]]:  # fmt: skip
-    """Flat and skill-chaining rates (medians) and the cost of each round.
+                options_steps: int) -> dict[str, list[float]]:  # fmt: skip
+    """Rates of each round: flat agents with torch kernels, flat agents with the compiled
+    kernels, skill-chaining agents.
 
-    The two trainers run in alternating chunks (flat, then skill chaining, ``rounds`` times),
-    and each round gives one cost = (skill-chaining time per agent step) / (flat time per
-    agent step). This machine's speed drifts by tens of percent over minutes; timing the two
-    seconds apart keeps that drift out of the ratio, which best-of rates taken a minute apart
-    do not.
+    The three trainers run in alternating chunks, ``rounds`` times, so each round gives one
+    cost = (skill-chaining time per agent step) / (flat time per agent step). This machine's
+    speed drifts by tens of percent over minutes; timing them seconds apart keeps that drift
+    out of the ratio, which best-of rates taken a minute apart do not. The skill-chaining
+    agent has no compiled kernels (its physics is compiled, as the flat agents'), so its cost
+    is given against both flat agents.
     """
-    flat = PopulationTrainer(TrainConfig(map=MAP, runs=population, episodes=10_000, seed=0),
-                             num_threads=threads)  # fmt: skip
-    flat.train(max_agent_steps=20 * population)
-    options = skill_chaining_trainer(population, threads)
-    flat_rates, option_rates = [], []
+    trainers = {}
+    for name, native in (("flat_torch", False), ("flat_native", None)):
+        cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=0)
+        trainers[name] = PopulationTrainer(cfg, num_threads=threads, native=native)
+        trainers[name].train(max_agent_steps=20 * population)
+    trainers["skill_chaining"] = skill_chaining_trainer(population, threads)
+    rates = {name: [] for name in trainers}
     for _ in range(rounds):
-        for trainer, steps, rates in ((flat, flat_steps, flat_rates),
-                                      (options, options_steps, option_rates)):  # fmt: skip
+        for name, trainer in trainers.items():
+            steps = options_steps if name == "skill_chaining" else flat_steps
             start, done = time.perf_counter(), trainer.agent_steps
             trainer.train(max_agent_steps=done + steps)
-            rates.append((trainer.agent_steps - done) / (time.perf_counter() - start))
-    costs = [f / o for f, o in zip(flat_rates, option_rates)]
-    return statistics.median(flat_rates), statistics.median(option_rates), costs
+            rates[name].append((trainer.agent_steps - done) / (time.perf_counter() - start))
+    return rates
 
 
 def time_population_run(runs: int, episodes: int, threads: int) -> tuple[float, int]:
@@ -170,24 +175,35 @@ def main() -> None:
     peer = max(NumpySarsa(seed=r).run(args.steps // 2) for r in range(2))
     print(f"flat Sarsa on {MAP}, torch {torch.__version__}, {args.threads} thread(s); "
           f"{args.steps:,} agent steps per row (best of 3)")
-    print(f"{'P':>5} | {'agent steps/s':>14} | {'numpy peer':>11} | {'ratio':>6}")
-    print(f"{'-' * 5}-|-{'-' * 14}-|-{'-' * 11}-|-{'-' * 6}")
+    print("compiled: the default (compiled Pinball step and Sarsa kernels, "
+          f"built: {native_sarsa.AVAILABLE}); torch only: native=False")
+    print(f"{'P':>5} | {'compiled':>10} | {'torch only':>10} | {'numpy peer':>10} | "
+          f"{'ratio':>6} | {'vs torch':>8}")
+    print(f"{'-' * 5}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 6}-|-{'-' * 8}")
     for population in (1, 10, 100):
         rate = time_trainer(population, args.steps, args.threads)
-        print(f"{population:>5} | {rate:>14,.0f} | {peer:>11,.0f} | {rate / peer:>6.2f}")
+        torch_rate = time_trainer(population, args.steps, args.threads, native=False)
+        print(f"{population:>5} | {rate:>10,.0f} | {torch_rate:>10,.0f} | {peer:>10,.0f} | "
+              f"{rate / peer:>6.2f} | {rate / torch_rate:>8.2f}")
     print("\nskill chaining with options live (12 slots), alternating with flat agents in the "
-          "same process; cost = time per agent step relative to flat (target <= 2.5 at P = 100)")
-    print(f"{'P':>5} | {'flat steps/s':>13} | {'skill chaining':>14} | {'cost':>6} | "
-          f"{'cost range':>11}")
-    print(f"{'-' * 5}-|-{'-' * 13}-|-{'-' * 14}-|-{'-' * 6}-|-{'-' * 11}")
+          "same process; cost = time per agent step relative to flat (target <= 2.5 at P = 100), "
+          "median over rounds (range)")
+    print(f"{'P':>5} | {'flat torch':>10} | {'flat comp.':>10} | {'skill ch.':>9} | "
+          f"{'cost vs flat torch':>18} | {'cost vs flat compiled':>21}")
+    print(f"{'-' * 5}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 9}-|-{'-' * 18}-|-{'-' * 21}")
     for population in (1, 100):
         flat_steps, options_steps = (1_500, 300) if population == 1 else (10_000, 5_000)
         scale = args.steps / 20_000
-        flat, options, costs = paired_cost(population, args.threads, args.rounds,
-                                           max(1, int(flat_steps * scale)),
-                                           max(1, int(options_steps * scale)))  # fmt: skip
-        print(f"{population:>5} | {flat:>13,.0f} | {options:>14,.0f} | "
-              f"{statistics.median(costs):>6.2f} | {min(costs):>5.2f}-{max(costs):<5.2f}")
+        rates = paired_cost(population, args.threads, args.rounds,
+                            max(1, int(flat_steps * scale)),
+                            max(1, int(options_steps * scale)))  # fmt: skip
+        med = {k: statistics.median(v) for k, v in rates.items()}
+        cells = []
+        for flat in ("flat_torch", "flat_native"):
+            costs = [f / o for f, o in zip(rates[flat], rates["skill_chaining"])]
+            cells.append(f"{statistics.median(costs):.2f} ({min(costs):.2f}-{max(costs):.2f})")
+        print(f"{population:>5} | {med['flat_torch']:>10,.0f} | {med['flat_native']:>10,.0f} | "
+              f"{med['skill_chaining']:>9,.0f} | {cells[0]:>18} | {cells[1]:>21}")
     runs, episodes = (100, 250) if args.full else (100, 5)
     wall, steps = time_population_run(runs, episodes, args.threads)
     note = "" if args.full else " (short version; --full times the paper's 100 x 250)"

@@ -16,7 +16,13 @@ operations (:mod:`.kernels`), on a compact working copy of the agents still trai
 * the update ``delta = (r + gamma Q(s', a')) - Q(s, a)``, ``w[a] += step * (delta * phi)`` keeps
   :class:`SarsaUpdate`'s expression order.
 
-``tests/trainers/test_flat.py`` checks the fast path against the library pieces bit for bit.
+On the CPU, when the extension is built, the same steps run in C instead (:mod:`.native_sarsa`,
+``native=True``, the default there): one pass per agent row for Q(s', .), the tabulated choice
+and the update, with FourierBasis's feature bits but dot products summed in an order of its
+own, so the weights agree with the library pieces to rounding rather than bit for bit.
+
+``tests/trainers/test_flat.py`` checks the torch path against the library pieces bit for bit,
+and the compiled path to 1e-10 with the same decisions.
 
 Episode protocol (driven by the trainer, rows = active agents in ascending id order):
 ``begin(obs)`` picks the first actions; ``observe(obs, reward)`` learns from a step in which no
