@@ -23,6 +23,7 @@ experiment; default: 100 agents x 5 episodes, said so in the output).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import math
 import statistics
@@ -34,6 +35,7 @@ import torch
 
 from skillchain_torch.envs.pinball import load_map
 from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
+from skillchain_torch.features import fourier
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig, native_sarsa
 
 MAP = "pinball_simple_single"
@@ -42,16 +44,28 @@ MAP = "pinball_simple_single"
 def time_trainer(population: int, agent_steps: int, threads: int, repeats: int = 3,
                  native: bool | None = None) -> float:
     """Best of ``repeats`` rates (agent steps / s) over ``agent_steps`` after a warm-up
-    (``native=False``: torch and Python only, without the compiled step and kernels)."""
+    (``native=False``: torch and Python only, without any compiled piece)."""
     best = 0.0
     for r in range(repeats):
         cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=r)
-        trainer = PopulationTrainer(cfg, num_threads=threads, native=native)
-        trainer.train(max_agent_steps=20 * population)  # warm-up: caches, first allocations
-        start, done = time.perf_counter(), trainer.agent_steps
-        trainer.train(max_agent_steps=done + agent_steps)
+        with compiled_features(native is not False):
+            trainer = PopulationTrainer(cfg, num_threads=threads, native=native)
+            trainer.train(max_agent_steps=20 * population)  # warm-up: caches, allocations
+            start, done = time.perf_counter(), trainer.agent_steps
+            trainer.train(max_agent_steps=done + agent_steps)
         best = max(best, (trainer.agent_steps - done) / (time.perf_counter() - start))
     return best
+
+
+@contextlib.contextmanager
+def compiled_features(on: bool):
+    """FourierBasis's compiled arguments on or off (a global switch; the same bits either way)."""
+    saved = fourier.NATIVE
+    fourier.NATIVE = on and fourier._fourier_native is not None
+    try:
+        yield
+    finally:
+        fourier.NATIVE = saved
 
 
 class NumpySarsa:
@@ -135,8 +149,8 @@ def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
     cost = (skill-chaining time per agent step) / (flat time per agent step). This machine's
     speed drifts by tens of percent over minutes; timing them seconds apart keeps that drift
     out of the ratio, which best-of rates taken a minute apart do not. The skill-chaining
-    agent has no compiled kernels (its physics is compiled, as the flat agents'), so its cost
-    is given against both flat agents.
+    agent has no compiled kernels of its own (its physics and Fourier arguments are compiled,
+    as the flat agents'), so its cost is given against both flat agents.
     """
     trainers = {}
     for name, native in (("flat_torch", False), ("flat_native", None)):
@@ -148,8 +162,9 @@ def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
     for _ in range(rounds):
         for name, trainer in trainers.items():
             steps = options_steps if name == "skill_chaining" else flat_steps
-            start, done = time.perf_counter(), trainer.agent_steps
-            trainer.train(max_agent_steps=done + steps)
+            with compiled_features(name != "flat_torch"):
+                start, done = time.perf_counter(), trainer.agent_steps
+                trainer.train(max_agent_steps=done + steps)
             rates[name].append((trainer.agent_steps - done) / (time.perf_counter() - start))
     return rates
 
@@ -175,8 +190,8 @@ def main() -> None:
     peer = max(NumpySarsa(seed=r).run(args.steps // 2) for r in range(2))
     print(f"flat Sarsa on {MAP}, torch {torch.__version__}, {args.threads} thread(s); "
           f"{args.steps:,} agent steps per row (best of 3)")
-    print("compiled: the default (compiled Pinball step and Sarsa kernels, "
-          f"built: {native_sarsa.AVAILABLE}); torch only: native=False")
+    print("compiled: the default (compiled Pinball step, Fourier arguments and Sarsa kernels, "
+          f"built: {native_sarsa.AVAILABLE}); torch only: none of them")
     print(f"{'P':>5} | {'compiled':>10} | {'torch only':>10} | {'numpy peer':>10} | "
           f"{'ratio':>6} | {'vs torch':>8}")
     print(f"{'-' * 5}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 6}-|-{'-' * 8}")

@@ -5,10 +5,8 @@
  * microseconds each. Here each agent's row is one pass: its Q values, its epsilon-greedy
  * lookup, its Sarsa update.
  *
- * Arithmetic: features' arguments pi * (c . x) are formed exactly as FourierBasis forms them
- * (x_j * c_j added left to right, then times pi), so after torch's cos the features are the
- * same bits. Dot products use eight interleaved partial sums in a fixed order, so they are
- * deterministic and do not depend on the batch, the alignment or the other agents; they differ
+ * Arithmetic: the features come from FourierBasis. Dot products use eight interleaved partial
+ * sums in a fixed order, so they are deterministic and do not depend on the batch, the alignment or the other agents; they differ
  * from torch's (w * phi).sum(-1) in the last bits (its summation order is its own). The update
  * keeps SarsaUpdate's expression: w[a] += step * (delta * phi), delta = (r + gamma q') - q.
  * Compiled with -ffp-contract=off: no fused multiply-adds.
@@ -63,50 +61,6 @@ static void learn_row(double *wa, const double *phi, long F, double reward, doub
     double boot = terminal ? 0.0 : (use_gamma ? gamma * q_next : q_next);
     double delta = (reward + boot) - q_sa;
     for (long f = 0; f < F; f++) wa[f] += step[f * step_stride] * (delta * phi[f]);
-}
-
-/* The arguments of row i in FourierBasis's order: the partial sums (x_0 c_0 + x_1 c_1) + ... are
- * shared by all coefficient vectors with the same leading entries, last dimension fastest. */
-static double *fourier_row(const double *t, long dim, long k, long j, double acc, double pi,
-                           double *o)
-{
-    const double *tj = t + j * k;
-    if (j == dim - 1) { /* the last dimension: k outputs in one tight loop */
-        if (j == 0)
-            for (long c = 0; c < k; c++) o[c] = pi * tj[c];
-        else
-            for (long c = 0; c < k; c++) o[c] = pi * (acc + tj[c]);
-        return o + k;
-    }
-    for (long c = 0; c < k; c++)
-        o = fourier_row(t, dim, k, j + 1, j == 0 ? tj[c] : acc + tj[c], pi, o);
-    return o;
-}
-
-/* fourier_args(n, dim, order, x, x_stride0, x_stride1, pi, out): out[i, c] = pi * (c . x_i),
- * with c . x = ((x_0 c_0 + x_1 c_1) + ...) and x_j c_j = x_j * (double)c_j, as FourierBasis. */
-static PyObject *fourier_args(PyObject *self, PyObject *args)
-{
-    Py_ssize_t n, dim, order, s0, s1;
-    unsigned long long x_p, out_p;
-    double pi;
-    if (!PyArg_ParseTuple(args, "nnnKnndK", &n, &dim, &order, &x_p, &s0, &s1, &pi, &out_p))
-        return NULL;
-    if (dim < 1 || dim > 16 || order < 0 || order > 63) {
-        PyErr_SetString(PyExc_ValueError, "fourier_args: need dim in 1..16 and order in 0..63");
-        return NULL;
-    }
-    const double *x = (const double *)(uintptr_t)x_p;
-    double *out = (double *)(uintptr_t)out_p;
-    long k = order + 1, F = 1;
-    for (long j = 0; j < dim; j++) F *= k;
-    double t[16 * 64];
-    for (Py_ssize_t i = 0; i < n; i++) {
-        for (long j = 0; j < dim; j++)
-            for (long c = 0; c < k; c++) t[j * k + c] = x[i * s0 + j * s1] * (double)c;
-        fourier_row(t, dim, k, 0, 0.0, pi, out + i * F);
-    }
-    Py_RETURN_NONE;
 }
 
 /* linear_q(n, D, F, w, n_rows, rows, phi, q): q[d, i] = w[d, r_i] . phi[i], with r_i = rows[i]
@@ -188,7 +142,6 @@ static PyObject *sarsa_observe(PyObject *self, PyObject *args)
 }
 
 static PyMethodDef methods[] = {
-    {"fourier_args", fourier_args, METH_VARARGS, "pi * (c . x) for every coefficient vector."},
     {"linear_q", linear_q, METH_VARARGS, "Action-major Q values of some rows."},
     {"sarsa_learn", sarsa_learn, METH_VARARGS, "One Sarsa update per row."},
     {"sarsa_observe", sarsa_observe, METH_VARARGS, "Q(s', .), the choice a', the update."},

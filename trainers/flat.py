@@ -18,8 +18,8 @@ operations (:mod:`.kernels`), on a compact working copy of the agents still trai
 
 On the CPU, when the extension is built, the same steps run in C instead (:mod:`.native_sarsa`,
 ``native=True``, the default there): one pass per agent row for Q(s', .), the tabulated choice
-and the update, with FourierBasis's feature bits but dot products summed in an order of its
-own, so the weights agree with the library pieces to rounding rather than bit for bit.
+and the update, with dot products summed in an order of its own, so the weights agree with the
+library pieces to rounding rather than bit for bit (the features are FourierBasis's either way).
 
 ``tests/trainers/test_flat.py`` checks the torch path against the library pieces bit for bit,
 and the compiled path to 1e-10 with the same decisions.
@@ -125,8 +125,6 @@ class FlatSarsaAgent(nn.Module):
     # ------------------------------------------------------------------ pieces
     def featurize(self, obs: Tensor) -> Tensor:
         """``FourierBasis(obs)``: ``[n, 4] -> [n, F]``."""
-        if self.native:
-            return native_sarsa.fourier_features(self.features, obs)
         return self.features(obs)
 
     def q_values(self, phi: Tensor, rows: Tensor | None = None) -> Tensor:
@@ -210,7 +208,7 @@ class FlatSarsaAgent(nn.Module):
         """Learn from ``(s, a, r, s')`` for every active row (no episode ended); next actions."""
         w = self._work
         if self.native:  # the whole step per agent row in C
-            phi1 = native_sarsa.fourier_features(self.features, obs)
+            phi1 = self.features(obs)
             self._next_slot()
             a1 = native_sarsa.sarsa_observe(w.w, w.phi, phi1, w.action, reward, w.table,
                                             w.j - 1, w.step_size, w.gamma_float)
@@ -246,7 +244,7 @@ class FlatSarsaAgent(nn.Module):
                 have finished training and are dropped by the next :meth:`compact`.
         """
         w = self._work
-        phi1 = self.featurize(obs)
+        phi1 = self.features(obs)
         q1 = self.q_values(phi1)
         self._next_slot()
         a1 = self._decide_slot(q1)
@@ -255,7 +253,7 @@ class FlatSarsaAgent(nn.Module):
             # A terminated row's next decision is its start decision: it takes this step's
             # uniforms (its decision at s' above is discarded). A truncated row already used
             # them at s', so its start decision draws two more.
-            phi_start = self.featurize(start_obs)
+            phi_start = self.features(start_obs)
             q_start = self.q_values(phi_start, restart_rows)
             a_start = self._decide_slot(q_start, restart_rows)
             extra = truncated[restart_rows]

@@ -3,8 +3,6 @@
 :class:`~.flat.FlatSarsaAgent` uses these on the CPU when the extension is built
 (:data:`AVAILABLE`); they replace the torch fast path of :mod:`.kernels`:
 
-* :func:`fourier_features`: ``FourierBasis(obs)``, the same bits (the arguments ``pi c.x`` are
-  formed in FourierBasis's order, and the cosine is torch's, in place);
 * :func:`linear_q`, :func:`sarsa_learn`, :func:`sarsa_observe`: Q values, the Sarsa update and
   the fused step (Q(s', .), tabulated epsilon-greedy choice, update) one agent row at a time.
   Their dot products sum in a fixed order of their own, so they agree with
@@ -17,16 +15,13 @@ bool for flags) tensors of matching shapes.
 
 Example:
     >>> import torch
-    >>> from skillchain_torch.features import FourierBasis
-    >>> basis = FourierBasis(4, 3)
-    >>> obs = torch.rand(2, 4, dtype=torch.float64)
-    >>> bool((fourier_features(basis, obs) == basis(obs)).all()) if AVAILABLE else True
-    True
+    >>> w = torch.ones(5, 2, 3, dtype=torch.float64)  # [D, n, F]
+    >>> phi = torch.tensor([[1.0, 2.0, 3.0], [0.5, 0.5, 0.5]], dtype=torch.float64)
+    >>> linear_q(w, phi).tolist()[0] if AVAILABLE else [6.0, 1.5]
+    [6.0, 1.5]
 """
 
 from __future__ import annotations
-
-import math
 
 import torch
 from torch import Tensor
@@ -36,19 +31,9 @@ try:
 except ImportError:  # built without a C compiler: the agent keeps its torch path
     _c = None
 
-__all__ = ["AVAILABLE", "fourier_features", "linear_q", "sarsa_learn", "sarsa_observe"]
+__all__ = ["AVAILABLE", "linear_q", "sarsa_learn", "sarsa_observe"]
 
 AVAILABLE = _c is not None
-
-
-def fourier_features(basis, obs: Tensor, out: Tensor | None = None) -> Tensor:
-    """``basis(obs)`` for observations ``[n, dim]`` (any strides), bit for bit: ``[n, F]``."""
-    n = obs.shape[0]
-    if out is None:
-        out = torch.empty(n, basis.num_features, dtype=torch.float64)
-    s0, s1 = obs.stride()
-    _c.fourier_args(n, basis.dim, basis.order, obs.data_ptr(), s0, s1, math.pi, out.data_ptr())
-    return out.cos_()
 
 
 def linear_q(w: Tensor, phi: Tensor, rows: Tensor | None = None) -> Tensor:
