@@ -23,6 +23,12 @@ found in one pass; the event is resolved and the scan restarts from the next sub
 :class:`~skillchain_torch.envs.pinball.grid.CollisionGrid` first sends balls that cannot meet
 anything during this step down a free-flight path, and gives the others a few candidate edges.
 
+Three paths, one set of bits: on the CPU in float64 every batch goes through the compiled step
+(:mod:`.native`, when ``pip install`` could compile it); without it, batches of up to
+``SCALAR_MAX_BATCH`` balls run in Python floats (:mod:`.scalar`) and larger ones, and every
+batch on other devices, through the tensor code below. Tests step random rollouts through all
+three and compare every bit.
+
 Why no atan2: Java reflects with atan2/cos/sin; the vector form ``v' = 2 (v.e)/(e.e) e - v``
 agrees to ~1e-16 and uses only correctly rounded arithmetic, so a ball's trajectory does not
 depend on which batch it is in (torch's vectorised atan2 differs in the last bit between SIMD
