@@ -160,7 +160,8 @@ class ActiveEnvStepper:
         obs, reward = out[: 4 * n].view(n, 4), out[4 * n :]
         terminated = torch.empty(n, dtype=torch.bool)
         action = action.to(torch.long).contiguous()
-        n_goal = self._native.step_into(state, action, reward, terminated, obs)
+        # check=False: every tensor here was made (or made contiguous int64) just above.
+        n_goal = self._native.step_into(state, action, reward, terminated, obs, check=False)
         self._count += 1
         if self.max_episode_steps is None:
             if n_goal == 0:

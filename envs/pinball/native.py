@@ -109,16 +109,21 @@ class NativeBoard:
         terminated: Tensor,
         obs: Tensor | None = None,
         events: Tensor | None = None,
+        check: bool = True,
     ) -> int:
         """Advance ``state`` ``[n, 4]`` in place; write the outputs; return the number at the goal.
 
         Every tensor must be contiguous on the CPU: ``state`` float64, ``action`` int64,
         ``reward`` float64 ``[n]``, ``terminated`` bool ``[n]``, optional ``obs`` float64
-        ``[n, 4]`` (the observation after the step) and ``events`` int64 ``[n, 4]``.
-        Raises ``ValueError`` naming the first ball with an action outside 0..4 or a
-        non-finite state; balls before it have been stepped.
+        ``[n, 4]`` (the observation after the step) and ``events`` int64 ``[n, 4]``
+        (``ValueError`` otherwise: the C code reads raw memory; ``check=False`` skips that
+        test, ~10 us, for callers that allocate the tensors themselves). Raises ``ValueError``
+        naming the first ball with an action outside 0..4 or a non-finite state; balls before
+        it have been stepped.
         """
         n = state.shape[0]
+        if check:
+            _check_layout(n, state, action, reward, terminated, obs, events)
         out = _native.step(
             n,
             state.data_ptr(),
@@ -148,6 +153,22 @@ class NativeBoard:
         terminated = torch.empty(n, dtype=torch.bool)
         count = self.step_into(state, action, reward, terminated, events=events)
         return reward, terminated, count
+
+
+def _check_layout(n, state, action, reward, terminated, obs, events) -> None:
+    wanted = [("state", state, torch.float64, (n, 4)), ("action", action, torch.int64, (n,)),
+              ("reward", reward, torch.float64, (n,)), ("terminated", terminated, torch.bool, (n,))]
+    if obs is not None:
+        wanted.append(("obs", obs, torch.float64, (n, 4)))
+    if events is not None:
+        wanted.append(("events", events, torch.int64, (n, 4)))
+    for name, t, dtype, shape in wanted:
+        if (t.dtype != dtype or tuple(t.shape) != shape or not t.is_contiguous()
+                or t.device.type != "cpu"):
+            raise ValueError(
+                f"{name} must be a contiguous CPU {dtype} tensor of shape {list(shape)}, got "
+                f"{t.dtype} {list(t.shape)} on {t.device}"
+                f"{'' if t.is_contiguous() else ' (not contiguous)'}")
 
 
 _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

@@ -235,7 +235,7 @@ def _step_native(state, action, pinball_map):
     events = torch.empty(n, 4, dtype=torch.long)
     board = native.native_board(pinball_map)
     action = action.to(torch.long).contiguous()
-    board.step_into(next_state, action, reward, terminated, None, events)
+    board.step_into(next_state, action, reward, terminated, None, events, check=False)
     return next_state, reward, terminated, events
 
 

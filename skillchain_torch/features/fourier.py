@@ -58,7 +58,8 @@ class FourierBasis(nn.Module):
         lead = x.shape[:-1]
         x = x.to(self._k.dtype).reshape(-1, self.dim)
         n = x.shape[0]
-        if NATIVE and x.device.type == "cpu" and x.dtype == torch.float64 and self.dim <= 16:
+        if (NATIVE and x.device.type == "cpu" and x.dtype == torch.float64 and self.dim <= 16
+                and self.order <= 63):  # the C side's fixed-size tables
             out = torch.empty(n, self.num_features, dtype=torch.float64)
             s0, s1 = x.stride()
             _fourier_native.fourier_args(n, self.dim, self.order, x.data_ptr(), s0, s1, math.pi,

@@ -68,3 +68,18 @@ def test_observation_output_and_errors():
     state[1, 3] = float("inf")
     with pytest.raises(ValueError, match=r"state\[1\].*not finite"):
         nb.step_into(state, torch.tensor([0, 0]), reward, term)
+
+
+@needs_native
+def test_wrong_layout_is_refused_before_the_c_code_reads_it():
+    nb = native.native_board(load_map("pinball_empty"))
+    reward = torch.empty(2, dtype=torch.float64)
+    term = torch.empty(2, dtype=torch.bool)
+    state32 = torch.full((2, 4), 0.5)
+    with pytest.raises(ValueError, match=r"state must be a contiguous CPU torch.float64"):
+        nb.step_into(state32, torch.tensor([0, 1]), reward, term)
+    state = torch.full((4, 4), 0.5, dtype=torch.float64)[::2]
+    with pytest.raises(ValueError, match="not contiguous"):
+        nb.step_into(state, torch.tensor([0, 1]), reward, term)
+    with pytest.raises(ValueError, match=r"action must be .*torch.int64 tensor of shape \[2\]"):
+        nb.step_into(state.contiguous(), torch.tensor([0, 1], dtype=torch.int32), reward, term)
