@@ -104,6 +104,8 @@ def load_checkpoint(path: str | Path, trainer) -> None:
         trainer.load_state_dict(state)
     except (KeyError, RuntimeError, IndexError) as err:
         raise ValueError(f"{path}: inconsistent checkpoint contents ({err})") from None
+    except ValueError as err:  # e.g. saved by the other flat-agent kernel
+        raise ValueError(f"{path}: {err}") from None
 
 
 def latest_checkpoint(directory: str | Path) -> Path | None:

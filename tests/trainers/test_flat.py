@@ -207,3 +207,14 @@ def test_native_q_values_agree_with_linear_q_head():
     # and not by accident: a row's value does not depend on the other rows asked for
     assert torch.equal(native_sarsa.linear_q(w, phi[1:2], rows[1:2]),
                        native_sarsa.linear_q(w, phi, rows)[:, 1:2])
+
+
+@pytest.mark.skipif(not native_sarsa.AVAILABLE, reason="the compiled kernels were not built")
+def test_resuming_with_the_other_kernel_names_the_checkpoint(tmp_path):
+    from skillchain_torch.trainers import PopulationTrainer
+    from skillchain_torch.trainers.checkpoint import load_checkpoint
+
+    cfg = TrainConfig(runs=2, episodes=2, max_episode_steps=50, checkpoint_every=1)
+    path = PopulationTrainer(cfg, out_dir=tmp_path, native=False).train().checkpoint_path()
+    with pytest.raises(ValueError, match=r"ckpt_000002\.pt: this state was saved by a torch"):
+        load_checkpoint(path, PopulationTrainer(cfg, out_dir=tmp_path))
