@@ -210,6 +210,9 @@ class FlatSarsaAgent(nn.Module):
         if self.native:  # the whole step per agent row in C
             phi1 = self.features(obs)
             self._next_slot()
+            # The C code reads raw memory: rewards as contiguous float64 (a no-op from the
+            # stepper; the Python-float stepper hands a strided column).
+            reward = reward.to(torch.float64).contiguous()
             a1 = native_sarsa.sarsa_observe(w.w, w.phi, phi1, w.action, reward, w.table,
                                             w.j - 1, w.step_size, w.gamma_float)
             w.phi, w.action, w.rows = phi1, a1, None  # rows: only the torch path reads them
@@ -278,7 +281,8 @@ class FlatSarsaAgent(nn.Module):
         w = self._work
         if self.native:
             terminated = None if terminated is None else terminated.contiguous()
-            native_sarsa.sarsa_learn(w.w, w.phi, w.action, reward.contiguous(), q_next,
+            reward = reward.to(torch.float64).contiguous()
+            native_sarsa.sarsa_learn(w.w, w.phi, w.action, reward, q_next,
                                      terminated, w.step_size, w.gamma_float)
             return
         w_sa = w.w_flat.index_select(0, w.rows)

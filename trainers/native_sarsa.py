@@ -40,6 +40,8 @@ def linear_q(w: Tensor, phi: Tensor, rows: Tensor | None = None) -> Tensor:
     """``q[d, i] = w[d, rows[i]] . phi[i]`` for action-major weights ``[D, N, F]``: ``[D, n]``."""
     D, N, F = w.shape
     n = phi.shape[0]
+    phi = phi.contiguous()  # called at episode ends only: the copies cost nothing that shows
+    rows = None if rows is None else rows.to(torch.int64).contiguous()
     q = torch.empty(D, n, dtype=torch.float64)
     _c.linear_q(n, D, F, w.data_ptr(), N, 0 if rows is None else rows.data_ptr(),
                 phi.data_ptr(), q.data_ptr())

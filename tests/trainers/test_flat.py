@@ -218,3 +218,20 @@ def test_resuming_with_the_other_kernel_names_the_checkpoint(tmp_path):
     path = PopulationTrainer(cfg, out_dir=tmp_path, native=False).train().checkpoint_path()
     with pytest.raises(ValueError, match=r"ckpt_000002\.pt: this state was saved by a torch"):
         load_checkpoint(path, PopulationTrainer(cfg, out_dir=tmp_path))
+
+
+@pytest.mark.skipif(not native_sarsa.AVAILABLE, reason="the compiled kernels were not built")
+def test_native_agent_reads_strided_rewards_correctly():
+    """The Python-float stepper hands rewards as a column of an [n, 5] block."""
+    cfg = TrainConfig(runs=3, seed=2, alpha=0.05)
+    a, b = FlatSarsaAgent(cfg, native=True), FlatSarsaAgent(cfg, native=True)
+    obs = torch.rand(3, 4, dtype=F64, generator=torch.Generator().manual_seed(1))
+    a.begin(obs)
+    b.begin(obs)
+    block = torch.zeros(3, 5, dtype=F64)
+    block[:, 4] = torch.tensor([-5.0, -1.0, -5.0])
+    assert torch.equal(a.observe(obs, block[:, 4]), b.observe(obs, block[:, 4].clone()))
+    a.flush()
+    b.flush()
+    assert torch.equal(a.q_head.weight, b.q_head.weight)
+    assert a.q_head.weight.abs().sum() > 0
