@@ -47,7 +47,9 @@ class ActiveEnvStepper:
         scalar_max: without the compiled step, use the Python-float physics while at most
             this many rows are active (CPU and float64 only).
         native: use the compiled step (default: whenever it is built and the env is on the
-            CPU in float64). ``False`` selects the Python paths (tests compare them).
+            CPU in float64). ``False`` steps up to ``scalar_max`` rows in Python floats and
+            larger sets through ``pinball_step``, which on the CPU itself takes the compiled
+            step when built (``physics.NATIVE``). Every path gives the same bits.
 
     Example:
         >>> from skillchain_torch.envs.pinball.env import PinballEnv
