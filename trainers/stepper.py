@@ -139,17 +139,17 @@ class ActiveEnvStepper:
             return self._step_scalar(action)
         state, reward, terminated = pinball_step(self._state, action, self.pinball_map)
         self._state = state
+        return observation(state), reward, self._ends(terminated, bool(terminated.any()))
+
+    def _ends(self, terminated: Tensor, any_goal: bool):
+        """Count the step; ``(terminated, truncated)``, or ``None`` if no episode ended."""
         self._count += 1
-        ended = terminated
-        truncated = None
-        if self.max_episode_steps is not None:
-            truncated = (self._count >= self.max_episode_steps) & ~terminated
-            ended = terminated | truncated
-        if not bool(ended.any()):
-            return observation(state), reward, None
-        if truncated is None:
-            truncated = torch.zeros_like(terminated)
-        return observation(state), reward, (terminated, truncated)
+        if self.max_episode_steps is None:
+            return (terminated, torch.zeros_like(terminated)) if any_goal else None
+        truncated = (self._count >= self.max_episode_steps) & ~terminated
+        if not any_goal and not bool(truncated.any()):
+            return None
+        return terminated, truncated
 
     def _step_native(self, action: Tensor):
         state = self._state
@@ -164,15 +164,7 @@ class ActiveEnvStepper:
         action = action.to(torch.long).contiguous()
         # check=False: every tensor here was made (or made contiguous int64) just above.
         n_goal = self._native.step_into(state, action, reward, terminated, obs, check=False)
-        self._count += 1
-        if self.max_episode_steps is None:
-            if n_goal == 0:
-                return obs, reward, None
-            return obs, reward, (terminated, torch.zeros_like(terminated))
-        truncated = (self._count >= self.max_episode_steps) & ~terminated
-        if n_goal == 0 and not bool(truncated.any()):
-            return obs, reward, None
-        return obs, reward, (terminated, truncated)
+        return obs, reward, self._ends(terminated, n_goal > 0)
 
     def _step_scalar(self, action: Tensor):
         board, rows, out = self._board, self._rows, []

@@ -9,9 +9,9 @@ the extension, :data:`AVAILABLE` is False and the physics keeps its Python paths
 Example:
     >>> import torch
     >>> from skillchain_torch.envs.pinball import load_map
-    >>> from skillchain_torch.envs.pinball.native import AVAILABLE, NativeBoard
+    >>> from skillchain_torch.envs.pinball.native import AVAILABLE, native_board
     >>> if AVAILABLE:
-    ...     board = NativeBoard.of(load_map("pinball_simple_single"))
+    ...     board = native_board(load_map("pinball_simple_single"))
     ...     state = torch.tensor([[0.2, 0.9, 0.0, 0.0]], dtype=torch.float64)
     ...     reward, terminated, n_goal = board.step(state, torch.tensor([0]))
     ...     print(state[0, 2].item(), reward.item(), n_goal)
@@ -96,11 +96,6 @@ class NativeBoard:
             self.clearance.data_ptr(),
         )
 
-    @classmethod
-    def of(cls, pinball_map: PinballMap) -> NativeBoard:
-        """The cached board of ``pinball_map`` (see :func:`native_board`)."""
-        return native_board(pinball_map)
-
     def step_into(
         self,
         state: Tensor,
@@ -134,15 +129,14 @@ class NativeBoard:
             0 if events is None else events.data_ptr(),
             *self._board_args,
         )
-        if out < 0:
+        if out < 0:  # the same errors as pinball_step's other paths
+            from .physics import _raise_bad_action, _raise_bad_state  # (physics imports us)
+
             i = -out - 1
             a = int(action[i])
             if not 0 <= a <= 4:
-                raise ValueError(
-                    f"action[{i}] = {a} is out of range: actions are 0..4 "
-                    "(0 +x, 1 +y, 2 -x, 3 -y, 4 none)"
-                )
-            raise ValueError(f"state[{i}] = {state[i].tolist()} is not finite")
+                _raise_bad_action(i, a)
+            _raise_bad_state(i, state[i].tolist())
         return out
 
     def step(self, state: Tensor, action: Tensor, events: Tensor | None = None):

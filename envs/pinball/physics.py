@@ -229,12 +229,12 @@ def _step_native(state, action, pinball_map):
     """CPU float64 batches of any size through the compiled step (bit-identical, native.py)."""
     _check_structure(state, action, pinball_map)
     n = state.shape[0]
-    next_state = state.contiguous().clone()
+    next_state = state.clone(memory_format=torch.contiguous_format)  # stepped in place
     reward = torch.empty(n, dtype=torch.float64)
     terminated = torch.empty(n, dtype=torch.bool)
     events = torch.empty(n, 4, dtype=torch.long)
     board = native.native_board(pinball_map)
-    action = action.to(torch.long).contiguous()
+    action = action.to("cpu", torch.long).contiguous()  # C reads it as int64 host memory
     board.step_into(next_state, action, reward, terminated, None, events, check=False)
     return next_state, reward, terminated, events
 
