@@ -1,19 +1,26 @@
-"""Build hook for the two compiled pieces; everything else is in ``pyproject.toml``.
+"""Build hook for the compiled pieces; everything else is in ``pyproject.toml``.
 
 * ``envs/pinball/_native.c``: the Pinball step (same bits as the Python-float physics);
 * ``skillchain_torch/features/_fourier_native.c``: FourierBasis's arguments (same bits);
-* ``trainers/_sarsa_native.c``: the flat Sarsa agent's per-step arithmetic.
+* ``trainers/_sarsa_native.c``: the flat Sarsa agent's per-step arithmetic;
+* ``skillchain_torch/options/_initiation_native.c``: initiation-set memberships and fits;
+* ``skillchain_torch/agents/_hierarchical_native.c``: the hierarchical agent's per-step
+  arithmetic (top-level choice and SMDP update, option actions, intra-option updates).
+
+The agent kernels share ``skillchain_torch/native_maths.h`` (dot products, epsilon-greedy).
 
 All are optional: without a C compiler the install still succeeds and the code falls back to
-its torch and Python paths (``skillchain_torch.envs.pinball.native.AVAILABLE``,
-``skillchain_torch.features.fourier.NATIVE``, ``skillchain_torch.trainers.native_sarsa.AVAILABLE``),
-only slower. ``-ffp-contract=off`` keeps
-the compiler from fusing multiply-adds, which would change the last bits of trajectories.
+its torch and Python paths, only slower (each module's ``AVAILABLE``, e.g.
+``skillchain_torch.envs.pinball.native.AVAILABLE``; ``skillchain_torch.features.fourier.NATIVE``).
+``-ffp-contract=off`` keeps the compiler from fusing multiply-adds, which would change the last
+bits of trajectories.
 """
 
 from setuptools import Extension, setup
 
 FLAGS = ["-O2", "-ffp-contract=off", "-fno-fast-math"]
+SHARED = dict(include_dirs=["skillchain_torch"], depends=["skillchain_torch/native_maths.h"],
+              extra_compile_args=FLAGS, optional=True)
 
 setup(
     ext_modules=[
@@ -23,6 +30,10 @@ setup(
                   sources=["skillchain_torch/features/_fourier_native.c"], extra_compile_args=FLAGS,
                   optional=True),
         Extension("skillchain_torch.trainers._sarsa_native",
-                  sources=["trainers/_sarsa_native.c"], extra_compile_args=FLAGS, optional=True),
+                  sources=["trainers/_sarsa_native.c"], **SHARED),
+        Extension("skillchain_torch.options._initiation_native",
+                  sources=["skillchain_torch/options/_initiation_native.c"], **SHARED),
+        Extension("skillchain_torch.agents._hierarchical_native",
+                  sources=["skillchain_torch/agents/_hierarchical_native.c"], **SHARED),
     ]
 )

@@ -5,9 +5,8 @@
  * microseconds each. Here each agent's row is one pass: its Q values, its epsilon-greedy
  * lookup, its Sarsa update.
  *
- * Arithmetic: the features come from FourierBasis. Dot products use eight interleaved partial
- * sums in a fixed order, so they are deterministic and do not depend on the batch, the alignment or the other agents; they differ
- * from torch's (w * phi).sum(-1) in the last bits (its summation order is its own). The update
+ * Arithmetic: the features come from FourierBasis. Dot products are native_maths.h's (a fixed
+ * order of their own: deterministic, independent of the batch, not torch's bits). The update
  * keeps SarsaUpdate's expression: w[a] += step * (delta * phi), delta = (r + gamma q') - q.
  * Compiled with -ffp-contract=off: no fused multiply-adds.
  *
@@ -18,26 +17,9 @@
 #include <math.h>
 #include <stdint.h>
 
-#define MAX_DECISIONS 16
+#include "native_maths.h"  /* dot */
 
-static double dot(const double *a, const double *b, long n)
-{
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, s4 = 0.0, s5 = 0.0, s6 = 0.0, s7 = 0.0;
-    long f = 0;
-    for (; f + 8 <= n; f += 8) {
-        s0 += a[f] * b[f];
-        s1 += a[f + 1] * b[f + 1];
-        s2 += a[f + 2] * b[f + 2];
-        s3 += a[f + 3] * b[f + 3];
-        s4 += a[f + 4] * b[f + 4];
-        s5 += a[f + 5] * b[f + 5];
-        s6 += a[f + 6] * b[f + 6];
-        s7 += a[f + 7] * b[f + 7];
-    }
-    double tail = 0.0;
-    for (; f < n; f++) tail += a[f] * b[f];
-    return (((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7))) + tail;
-}
+#define MAX_DECISIONS 16
 
 /* Bit code of the greedy decisions (q == max q); 0 when any value is NaN (as torch's amax). */
 static long greedy_code(const double *q, long d_count)

@@ -41,6 +41,7 @@ from torch import Tensor, nn
 from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
+from skillchain_torch.native import check_same_kernels
 from skillchain_torch.objectives import SarsaUpdate
 from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy
 from skillchain_torch.rng import CounterRNG
@@ -356,12 +357,7 @@ class FlatSarsaAgent(nn.Module):
 
     def load_state_dict(self, state, strict: bool = True, assign: bool = False):
         dev = self.q_head.weight.device
-        saved = bool(state.get("native", False))
-        if saved != self.native:
-            raise ValueError(
-                f"this state was saved by a {'native' if saved else 'torch'}-kernel agent, and "
-                f"this agent uses the {'native' if self.native else 'torch'} kernels, whose "
-                "rounding differs: resume with the same kind (native=...)")
+        check_same_kernels(state, self.native)
         self.q_head.load_state_dict(state["q_head"])
         self.rng.load_state_dict(state["rng"])
         self.rng.to(dev)

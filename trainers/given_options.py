@@ -54,7 +54,8 @@ class GivenOptionsAgent(HierarchicalAgent):
         device: torch device (default ``config.device``).
     """
 
-    def __init__(self, config: TrainConfig, device: torch.device | str | None = None):
+    def __init__(self, config: TrainConfig, device: torch.device | str | None = None,
+                 native: bool | None = None):
         cfg = config.resolved()
         path = getattr(cfg, "options", None)
         if not path:
@@ -65,5 +66,6 @@ class GivenOptionsAgent(HierarchicalAgent):
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device,
-                         overlap=True)  # as the options were learned (no-op if unrelated)
+                         overlap=True,  # as the options were learned (no-op if unrelated)
+                         native=native)
         self.config = cfg

@@ -30,7 +30,8 @@ class SkillChainingRunAgent(SkillChainingAgent):
         (3, 8)
     """
 
-    def __init__(self, config: TrainConfig, device: torch.device | str | None = None):
+    def __init__(self, config: TrainConfig, device: torch.device | str | None = None,
+                 native: bool | None = None):
         cfg = config.resolved()
         device = torch.device(cfg.device if device is None else device)
         from skillchain_torch.options import OptionBank
@@ -41,5 +42,5 @@ class SkillChainingRunAgent(SkillChainingAgent):
                                 centered=cfg.initiation_centered)  # fmt: skip
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
-                         scale_step_size=cfg.scale_step_size, device=device)
+                         scale_step_size=cfg.scale_step_size, device=device, native=native)
         self.config = cfg

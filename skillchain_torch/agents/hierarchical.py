@@ -51,11 +51,19 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.agents import native_hierarchical as _native
 from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
+from skillchain_torch.native import check_same_kernels
 from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate, discount
-from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
+from skillchain_torch.options import (
+    FourierOptionQHead,
+    GoalEvent,
+    OptionBank,
+    TerminationPredicate,
+    native_initiation,
+)
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
 
@@ -113,6 +121,12 @@ class HierarchicalAgent(nn.Module):
             of its parent's and older siblings' sets), for options discovered under it; the
             bank's tree must not change afterwards (discovery itself uses ``SkillChaining``).
         device: torch device (default: the bank's).
+        native: run the per-step arithmetic in C (:mod:`.native_hierarchical`, and the
+            classifier's memberships and fits, :mod:`~skillchain_torch.options.
+            native_initiation`). Default: when built, on the CPU in float64 with Fourier option
+            heads and a float ``completion_reward``. The same decisions from the same uniforms,
+            but sums in an order of their own: the numbers agree with ``native=False`` to
+            rounding, not bit for bit (each is reproducible on its own, and P-invariant).
     """
 
     def __init__(
@@ -130,10 +144,12 @@ class HierarchicalAgent(nn.Module):
         scale_step_size: bool = False,
         overlap: bool = False,
         device: torch.device | str | None = None,
+        native: bool | None = None,
     ):
         super().__init__()
         device = torch.device(bank.status.device if device is None else device)
         self.bank = bank.to(device)
+        self.native = self._resolve_native(native, completion_reward)
         self.population, self.slots = bank.population, bank.slots
         self.num_decisions = NUM_PRIMITIVES + self.slots
         self.order = int(order)
@@ -172,6 +188,27 @@ class HierarchicalAgent(nn.Module):
         self.duration = torch.zeros(P, **i64)  # k so far
         self.active = torch.ones(P, dtype=torch.bool, device=device)
         self._index = torch.arange(P, device=device)
+
+    def _resolve_native(self, native: bool | None, completion_reward) -> bool:
+        """The ``native`` argument made a choice; turns the classifier's compiled path on or
+        off with it. ``ValueError`` naming what is missing when ``True`` cannot be had."""
+        bank, f64 = self.bank, torch.float64
+        fourier = isinstance(bank.q_head, FourierOptionQHead)
+        needs = {
+            "the compiled kernels": _native.AVAILABLE and native_initiation.AVAILABLE,
+            "the CPU": bank.status.device.type == "cpu",
+            "Fourier option heads": fourier,
+            "float64 option heads and classifier": (not fourier or bank.q_head.weight.dtype == f64)
+            and bank.classifier.weight.dtype == f64,
+            "a float completion_reward": not isinstance(completion_reward, Tensor),
+        }
+        missing = [name for name, ok in needs.items() if not ok]
+        if native is None:
+            native = not missing
+        if native and missing:
+            raise ValueError(f"native=True needs {', '.join(missing)}")
+        bank.classifier.set_native(bool(native))
+        return bool(native)
 
     # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
     # parameters, buffers and submodules) costs more than the tensor maths for these.
@@ -228,6 +265,11 @@ class HierarchicalAgent(nn.Module):
         0 for the others). ``phi``: ``features(obs)``, from :meth:`_encode`."""
         available = self.top_level_available(obs, contains)
         rows = torch.ones_like(self.active) if rows is None else rows
+        if self.native:
+            q, decision = _native.choose(self.q_head.weight, phi, available, rows,
+                                         NUM_PRIMITIVES, uniforms, self.epsilon)  # fmt: skip
+            self.last_phi, self.last_q = phi, q
+            return phi, decision
         # Value only what can be chosen: the primitives, and the few options whose initiation
         # set holds the state (each value is the same row sum as a full forward).
         q = self.q_head.forward_mask(phi, available & rows[:, None], dense=NUM_PRIMITIVES)
@@ -238,6 +280,11 @@ class HierarchicalAgent(nn.Module):
     def _act(self, rows: Tensor, uniforms: Tensor) -> None:
         """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's
         epsilon-greedy action by its Q-head at the current state."""
+        if self.native:
+            self.action = _native.act(self.bank.q_head.weight, self.option_code, rows,
+                                      self.decision, self.option, uniforms, self.option_epsilon,
+                                      self.action.clone())  # fmt: skip
+            return
         action = self.decision.clamp(max=NUM_PRIMITIVES - 1)
         executing = rows & (self.option >= 0)
         index = executing.nonzero()[:, 0]
@@ -295,11 +342,18 @@ class HierarchicalAgent(nn.Module):
         reached = self.targets(next_obs, terminated, contains_next)
         # Intra-option Q-learning: every live option whose initiation set holds s.
         phi_next, next_code = self._encode(next_obs)
-        option_delta = self.option_update(
-            bank.q_head, self.obs, self.action, reward, next_obs, terminated, self.contains,
-            reached, learnable=bank.live() & stepped[:, None], code=self.option_code,
-            next_code=next_code,
-        )
+        learnable = bank.live() & stepped[:, None]
+        if self.native:
+            option_delta = _native.intra_option(
+                bank.q_head.weight, self.option_code, next_code, self.action, reward,
+                terminated, self.contains & learnable, reached.contiguous(),
+                bank.q_head.alpha, self.gamma, self.option_update.completion_reward,
+            )  # fmt: skip
+        else:
+            option_delta = self.option_update(
+                bank.q_head, self.obs, self.action, reward, next_obs, terminated, self.contains,
+                reached, learnable=learnable, code=self.option_code, next_code=next_code,
+            )  # fmt: skip
         # The decision in force accumulates the (discounted) reward.
         if self.gamma == 1.0:  # gamma^k = 1 exactly: skip the power
             ret = self.decision_return + reward
@@ -318,9 +372,15 @@ class HierarchicalAgent(nn.Module):
                                         rows=decision_ended)  # fmt: skip
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
-        smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
-                                 self.decision_return, self.duration.clamp(min=1), phi_next,
-                                 d_next, terminated, active=decision_ended, next_value=q_next)
+        if self.native:
+            smdp_delta = _native.smdp(self.q_head.weight, self.decision_phi, self.decision,
+                                      self.decision_return, self.duration.clamp(min=1), q_next,
+                                      terminated, decision_ended, self.update.step_size,
+                                      self.gamma)  # fmt: skip
+        else:
+            smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
+                                     self.decision_return, self.duration.clamp(min=1), phi_next,
+                                     d_next, terminated, active=decision_ended, next_value=q_next)
         # The state tensors are replaced, never written in place, so no copies are needed.
         info = {"decision_ended": decision_ended, "duration": self.duration,
                 "decision_return": self.decision_return, "option_delta": option_delta,
@@ -424,10 +484,12 @@ class HierarchicalAgent(nn.Module):
             "phi": self.decision_phi.clone(),
             "bank": self.bank.state_dict(),
             "episode": {name: getattr(self, name).clone() for name in self._EPISODE},
+            "native": self.native,
         }
 
     def load_state_dict(self, state, strict: bool = True, assign: bool = False):
         device = self.obs.device
+        check_same_kernels(state, self.native)
         self.q_head.load_state_dict(state["q_head"])
         self.bank.load_state_dict(state["bank"])
         self.rng.load_state_dict(state["rng"])
@@ -443,4 +505,4 @@ class HierarchicalAgent(nn.Module):
         return (f"population={self.population}, slots={self.slots}, "
                 f"epsilon={self.epsilon}, option_epsilon={self.option_epsilon}, "
                 f"gamma={self.gamma}, max_option_steps={self.max_option_steps}, "
-                f"active={int(self._index.numel())}")
+                f"active={int(self._index.numel())}, native={self.native}")

@@ -43,6 +43,7 @@ from skillchain_torch.discovery import (
 )
 from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 
+from . import native_hierarchical as _native
 from .hierarchical import MAX_OPTION_STEPS, NUM_PRIMITIVES, HierarchicalAgent
 
 __all__ = ["SkillChainingAgent"]
@@ -143,7 +144,9 @@ class SkillChainingAgent(HierarchicalAgent):
         value_next = self.last_q.gather(1, self.decision[:, None])[:, 0]
         going_on = (stepped & ~info["decision_ended"]).nonzero()[:, 0]
         if going_on.numel() > 0:
-            value_next[going_on] = self.q_head.q_value(self.last_phi, self.decision, going_on)
+            value_next[going_on] = (
+                _native.q_rows(self.q_head.weight, self.last_phi, self.decision, going_on)
+                if self.native else self.q_head.q_value(self.last_phi, self.decision, going_on))
         self.q_decision = torch.where(stepped, value_next, self.q_decision)
         self._begin_executions()
         return info

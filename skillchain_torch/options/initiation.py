@@ -28,6 +28,7 @@ from torch import Tensor, nn
 
 from skillchain_torch.features import PolynomialFeatures
 from skillchain_torch.invariant import rowwise_dot, rowwise_sum
+from skillchain_torch.options import native_initiation
 from skillchain_torch.options.examples import REPLACEMENTS, store_places
 from skillchain_torch.options.logistic import logistic_sweeps
 from skillchain_torch.options.q_head import _DTYPES, OBS_DIM, dtype_name
@@ -140,6 +141,41 @@ class InitiationClassifier(nn.Module):
         for name in ("trained", "constrained", "dirty"):
             self.register_buffer(name, zeros(pk, dtype=torch.bool, device=device))
         self.register_buffer("seeds", agent_seeds(seed, population).to(device))
+        # The compiled membership and fits (set_native); a run-time choice, not configuration.
+        self.native = False
+
+    def set_native(self, native: bool | None = None) -> bool:
+        """Use the compiled :func:`contains` and fits (:mod:`.native_initiation`) or not;
+        ``None``: when they are built and the classifier is on the CPU in float64. Their sums
+        run in an order of their own (rounding-level differences from the torch path).
+        Returns the choice.
+
+        Example:
+            >>> clf = InitiationClassifier(population=1, slots=2, capacity=8)
+            >>> clf.set_native(False), clf.native
+            (False, False)
+        """
+        cpu64 = self.weight.device.type == "cpu" and self.weight.dtype == torch.float64
+        if native is None:
+            native = cpu64 and native_initiation.AVAILABLE
+        if native and not (cpu64 and native_initiation.AVAILABLE):
+            raise ValueError(f"native=True needs the compiled classifier (built: "
+                             f"{native_initiation.AVAILABLE}) on the CPU in float64 (got "
+                             f"{self.weight.device}, {self.weight.dtype})")  # fmt: skip
+        self.native = bool(native)
+        if self.native:
+            dims = torch.zeros(OBS_DIM, dtype=torch.bool)
+            dims[list(self.distance_dims)] = True
+            self._dims = dims
+        return self.native
+
+    def _apply(self, fn, *args, **kwargs):
+        # Moved off the CPU or out of float64: the compiled path no longer applies.
+        out = super()._apply(fn, *args, **kwargs)
+        if self.native and (self.weight.device.type != "cpu"
+                            or self.weight.dtype != torch.float64):  # fmt: skip
+            self.native = False
+        return out
 
     # ----------------------------------------------------------------------------- membership
     def _check_obs(self, obs: Tensor) -> Tensor:
@@ -202,6 +238,11 @@ class InitiationClassifier(nn.Module):
     def contains(self, obs: Tensor) -> Tensor:
         """Initiation-set membership ``[P, K]``: true everywhere for an untrained slot, else
         ``logit > 0`` (``sigmoid > 1/2``), and near a positive example for constrained slots."""
+        if self.native:
+            obs = self._check_obs(obs)
+            return native_initiation.contains(
+                self.phi(obs), self.weight, self.bias, self.trained, self.constrained, obs,
+                self.examples, self.labels, self.count, self._dims, self.distance)
         member = (self.logit(obs) > 0) | ~self.trained
         # The distance test (C stored examples per slot) only where the logit said yes.
         check = self.constrained & member
@@ -319,7 +360,8 @@ class InitiationClassifier(nn.Module):
         """``sweeps`` gradient steps (:func:`logistic_sweeps`) on slots ``(pi, ki)`` over their
         first ``length`` stored places."""
         count = self.count[pi, ki]
-        params = logistic_sweeps(
+        sweeps = native_initiation.logistic_sweeps if self.native else logistic_sweeps
+        params = sweeps(
             self.phi(self.examples[pi, ki, :length]),
             self.labels[pi, ki, :length],
             torch.arange(length, device=count.device) < count[:, None],

@@ -21,7 +21,7 @@ from torch import Tensor
 
 from skillchain_torch.invariant import rowwise_sum
 
-__all__ = ["logistic_sweeps"]
+__all__ = ["logistic_sweeps", "sweep_terms"]
 
 
 def logistic_sweeps(x: Tensor, labels: Tensor, stored: Tensor, params: Tensor, lr: float,
@@ -48,20 +48,8 @@ def logistic_sweeps(x: Tensor, labels: Tensor, stored: Tensor, params: Tensor, l
     (``= lr * weight * (sigmoid(z) - y)``), ``v += sum_l x_l g_l``. ``sigmoid`` itself is
     avoided: its vectorised and scalar paths differ in the last bit.
     """
-    x = torch.cat([x, torch.ones_like(x[..., :1])], dim=-1)  # [M, L, F + 1]
+    x, step, minus_step_y = sweep_terms(x, labels, stored, lr, balanced)
     xt = x.transpose(1, 2).contiguous()  # [M, F + 1, L] to reduce over the examples
-    y = labels.to(x.dtype)
-    zero = torch.zeros((), dtype=x.dtype, device=x.device)
-    count = rowwise_sum(stored.to(x.dtype))
-    if balanced:  # each example weighs 1 / (2 * its class's count)
-        positives = rowwise_sum(torch.where(stored, y, zero))
-        negatives = count - positives
-        weight = torch.where(y > 0, 0.5 / positives.clamp(min=1.0)[:, None],
-                             0.5 / negatives.clamp(min=1.0)[:, None])  # fmt: skip
-    else:  # the plain mean
-        weight = (1.0 / count)[:, None].expand_as(y)
-    step = torch.where(stored, lr * weight, zero)  # [M, L]
-    minus_step_y = -(step * y)
     v = -params.to(x.dtype)  # [M, F + 1]
     # The same arithmetic as
     #   g = step / (1 + exp((x * v).sum(-1))) - step * y;  v = v + (xt * g).sum(-1)
@@ -78,3 +66,27 @@ def logistic_sweeps(x: Tensor, labels: Tensor, stored: Tensor, params: Tensor, l
     # Each sum above reduces a contiguous last dim with more than one row, so every row is
     # summed alone in a fixed order (see skillchain_torch.invariant).
     return -v
+
+
+def sweep_terms(x: Tensor, labels: Tensor, stored: Tensor, lr: float,
+                balanced: bool) -> tuple[Tensor, Tensor, Tensor]:  # fmt: skip
+    """What every sweep of :func:`logistic_sweeps` reuses: ``(x1, step, minus_step_y)``.
+
+    ``x1 [M, L, F + 1]``: the features with a constant 1 appended (the intercept's);
+    ``step [M, L]``: ``lr`` times each example's weight in the loss (0 for empty places);
+    ``minus_step_y``: ``-(step * y)``. Shared with the compiled sweeps
+    (:mod:`~skillchain_torch.options.native_initiation`), which start from the same numbers.
+    """
+    x = torch.cat([x, torch.ones_like(x[..., :1])], dim=-1)  # [M, L, F + 1]
+    y = labels.to(x.dtype)
+    zero = torch.zeros((), dtype=x.dtype, device=x.device)
+    count = rowwise_sum(stored.to(x.dtype))
+    if balanced:  # each example weighs 1 / (2 * its class's count)
+        positives = rowwise_sum(torch.where(stored, y, zero))
+        negatives = count - positives
+        weight = torch.where(y > 0, 0.5 / positives.clamp(min=1.0)[:, None],
+                             0.5 / negatives.clamp(min=1.0)[:, None])  # fmt: skip
+    else:  # the plain mean
+        weight = (1.0 / count)[:, None].expand_as(y)
+    step = torch.where(stored, lr * weight, zero)  # [M, L]
+    return x, step, -(step * y)

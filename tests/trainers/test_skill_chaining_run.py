@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from skillchain_torch.agents import SkillChainingAgent
+from skillchain_torch.agents import SkillChainingAgent, native_hierarchical
 from skillchain_torch.options import OptionBank, OptionStatus
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 from skillchain_torch.trainers.checkpoint import load_checkpoint
@@ -17,28 +17,32 @@ from skillchain_torch.trainers.discovery_log import DiscoveryLog, option_tree
 
 # pinball_box: an open box where random play finds the hole within a few hundred steps, so
 # agents create options in their first episodes, at different episodes.
+KERNELS = [False, True] if native_hierarchical.AVAILABLE else [False]
 BOX = dict(agent="skill-chaining", map="pinball_box", max_episode_steps=300, slots=4)
 
 
-def trainer_for(runs, seed, episodes=8, gestation=2, **kwargs):
-    """A trainer whose agents gestate 2 episodes, so options join and learn in a short run."""
+def trainer_for(runs, seed, episodes=8, gestation=2, native=None, **kwargs):
+    """A trainer whose agents gestate 2 episodes, so options join and learn in a short run
+    (``native``: the agent's compiled kernels, default when built)."""
     config = TrainConfig(runs=runs, seed=seed, episodes=episodes, **{**BOX, **kwargs})
     trainer = PopulationTrainer(config, **({"out_dir": kwargs.pop("out_dir")}
                                            if "out_dir" in kwargs else {}))  # fmt: skip
     bank = OptionBank.build(runs, config.slots, seed=seed)
     trainer.agent = SkillChainingAgent(bank, order=4, alpha=0.001, seed=seed,
-                                       gestation=gestation)  # fmt: skip
+                                       gestation=gestation, native=native)  # fmt: skip
     return trainer
 
 
 @pytest.mark.slow
-def test_agent_alone_equals_agent_in_population():
-    population = trainer_for(3, seed=5).train()
+@pytest.mark.parametrize("native", KERNELS)
+def test_agent_alone_equals_agent_in_population(native):
+    population = trainer_for(3, seed=5, native=native).train()
+    assert population.agent.native is native
     created = population.agent.bank.created_episode
     assert len({tuple(row.tolist()) for row in created}) > 1  # spawned at different episodes
     assert (population.agent.bank.status >= OptionStatus.LEARNING).any()
     for p in range(3):
-        alone = trainer_for(1, seed=5 + p).train()
+        alone = trainer_for(1, seed=5 + p, native=native).train()
         assert np.array_equal(alone.returns[0], population.returns[p])
         for name in ("status", "parent", "target_event", "created_episode"):
             assert torch.equal(getattr(alone.agent.bank, name)[0],

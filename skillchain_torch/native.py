@@ -1,0 +1,30 @@
+"""The one rule the compiled agent kernels share: a state resumes only on its own kind.
+
+The flat agent (:mod:`skillchain_torch.trainers.native_sarsa`) and the hierarchical agents
+(:mod:`skillchain_torch.agents.native_hierarchical`) each have a torch path and a compiled
+one. Their sums run in different orders, so a run saved by one kind and continued by the other
+would match neither an uninterrupted torch run nor an uninterrupted compiled one. Agents store
+their kind in their state (``"native"``) and refuse a state of the other kind.
+
+Example:
+    >>> check_same_kernels({"native": True}, native=True)
+    >>> check_same_kernels({}, native=True)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: this state was saved by a torch-kernel agent, and this agent uses the native ...
+"""
+
+from __future__ import annotations
+
+__all__ = ["check_same_kernels"]
+
+
+def check_same_kernels(state: dict, native: bool) -> None:
+    """``ValueError`` unless ``state`` (an agent's ``state_dict``; no ``"native"`` key: saved
+    before the compiled kernels, i.e. torch) was saved by an agent of kind ``native``."""
+    saved = bool(state.get("native", False))
+    if saved != native:
+        raise ValueError(
+            f"this state was saved by a {'native' if saved else 'torch'}-kernel agent, and "
+            f"this agent uses the {'native' if native else 'torch'} kernels, whose "
+            "rounding differs: resume with the same kind (native=...)")

@@ -1,0 +1,69 @@
+/* Arithmetic shared by the compiled agent kernels (trainers/_sarsa_native.c,
+ * skillchain_torch/agents/_hierarchical_native.c, skillchain_torch/options/_initiation_native.c).
+ *
+ * dot: eight interleaved partial sums in a fixed order, so a value depends only on its two
+ * vectors (not on the batch, the alignment or the other agents). It differs from torch's
+ * (a * b).sum(-1) in the last bits: torch's summation order is its own.
+ *
+ * epsilon_greedy: skillchain_torch.policies.epsilon_greedy's rule for one agent, decision for
+ * decision: u0 < epsilon explores among the available decisions, otherwise the available
+ * maximisers of q are the candidates; u1 picks the floor(u1 * count)-th of them.
+ *
+ * Compiled with -ffp-contract=off: no fused multiply-adds.
+ */
+#ifndef SKILLCHAIN_NATIVE_MATHS_H
+#define SKILLCHAIN_NATIVE_MATHS_H
+
+#include <math.h>
+#include <stdint.h>
+
+static inline double dot(const double *a, const double *b, long n)
+{
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, s4 = 0.0, s5 = 0.0, s6 = 0.0, s7 = 0.0;
+    long f = 0;
+    for (; f + 8 <= n; f += 8) {
+        s0 += a[f] * b[f];
+        s1 += a[f + 1] * b[f + 1];
+        s2 += a[f + 2] * b[f + 2];
+        s3 += a[f + 3] * b[f + 3];
+        s4 += a[f + 4] * b[f + 4];
+        s5 += a[f + 5] * b[f + 5];
+        s6 += a[f + 6] * b[f + 6];
+        s7 += a[f + 7] * b[f + 7];
+    }
+    double tail = 0.0;
+    for (; f < n; f++) tail += a[f] * b[f];
+    return (((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7))) + tail;
+}
+
+/* Largest of q[d] over the d with ok[d] (all when ok is 0); NaN if any of them is NaN (as
+ * torch's amax), -inf if none. */
+static inline double masked_max(const double *q, const uint8_t *ok, long n)
+{
+    double m = -INFINITY;
+    for (long d = 0; d < n; d++) {
+        if (ok && !ok[d]) continue;
+        if (isnan(q[d])) return NAN;
+        if (q[d] > m) m = q[d];
+    }
+    return m;
+}
+
+/* One agent's epsilon-greedy decision among n (ok: availability, 0 = all available). */
+static inline long epsilon_greedy(const double *q, const uint8_t *ok, long n, double epsilon,
+                           double u0, double u1)
+{
+    int explore = u0 < epsilon;
+    double m = explore ? 0.0 : masked_max(q, ok, n);
+    long count = 0;
+    for (long d = 0; d < n; d++)
+        if ((!ok || ok[d]) && (explore || q[d] == m)) count++;
+    if (count == 0) return 0;  /* NaN among the values: torch's argmax of nothing */
+    long k = (long)floor(u1 * (double)count);
+    if (k > count - 1) k = count - 1;
+    for (long d = 0; d < n; d++)
+        if ((!ok || ok[d]) && (explore || q[d] == m) && k-- == 0) return d;
+    return 0;
+}
+
+#endif

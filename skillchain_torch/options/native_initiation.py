@@ -1,0 +1,72 @@
+"""The initiation classifier's memberships and fits in C (``_initiation_native.c``).
+
+:class:`~skillchain_torch.options.InitiationClassifier` uses these when its ``native`` flag is
+on (the skill-chaining agent turns it on with its own compiled kernels, on CPU float64):
+
+* :func:`contains`: every slot's membership of one state per agent, each slot one pass (the
+  logit, then for constrained slots the stored positives until one is within reach);
+* :func:`logistic_sweeps`: :func:`~skillchain_torch.options.logistic.logistic_sweeps` with the
+  sweeps in one call instead of five tensor operations each.
+
+Their sums run in a fixed order of their own, so they agree with the torch path to rounding,
+not bit for bit (a membership differs only for a state within rounding of a boundary). Each
+slot's numbers depend on that slot alone, so agent p in a population equals agent p alone.
+
+Example:
+    >>> import torch
+    >>> x = torch.tensor([[[1.0, 0.0], [1.0, 1.0]]], dtype=torch.float64)
+    >>> labels, stored = torch.tensor([[True, False]]), torch.ones(1, 2, dtype=torch.bool)
+    >>> params = torch.zeros(1, 3, dtype=torch.float64)
+    >>> from skillchain_torch.options import logistic
+    >>> fit = logistic_sweeps if AVAILABLE else logistic.logistic_sweeps
+    >>> bool(fit(x, labels, stored, params, lr=1.0, sweeps=50)[0, 1] < 0)
+    True
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from skillchain_torch.options.logistic import sweep_terms
+
+try:
+    from skillchain_torch.options import _initiation_native as _c
+except ImportError:  # built without a C compiler: the classifier keeps its torch path
+    _c = None
+
+__all__ = ["AVAILABLE", "contains", "logistic_sweeps"]
+
+AVAILABLE = _c is not None
+OBS_DIM = 4
+
+
+def contains(phi: Tensor, weight: Tensor, bias: Tensor, trained: Tensor, constrained: Tensor,
+             obs: Tensor, examples: Tensor, labels: Tensor, count: Tensor,
+             dims: Tensor, distance: float) -> Tensor:  # fmt: skip
+    """``BoolTensor [P, K]``: the classifier's membership rule for ``obs [P, 4]``.
+
+    ``phi [P, F]``: the classifier's features of ``obs``; the others are its parameters and
+    stores as they are (contiguous CPU float64; ``dims``: bool ``[4]``, the distance's dims).
+    """
+    P, K, F = weight.shape
+    out = torch.empty(P, K, dtype=torch.bool)
+    phi, obs = phi.contiguous(), obs.contiguous()
+    _c.contains(P, K, F, examples.shape[2], phi.data_ptr(), weight.data_ptr(), bias.data_ptr(),
+                trained.data_ptr(), constrained.data_ptr(), obs.data_ptr(),
+                examples.data_ptr(), labels.data_ptr(), count.data_ptr(), dims.data_ptr(),
+                float(distance), out.data_ptr())  # fmt: skip
+    return out
+
+
+def logistic_sweeps(x: Tensor, labels: Tensor, stored: Tensor, params: Tensor, lr: float,
+                    sweeps: int, balanced: bool = False) -> Tensor:  # fmt: skip
+    """:func:`~skillchain_torch.options.logistic.logistic_sweeps` (same arguments, same
+    result up to rounding), the sweeps compiled; CPU float64."""
+    x, step, minus_step_y = sweep_terms(x, labels, stored, lr, balanced)
+    x, step, minus_step_y = x.contiguous(), step.contiguous(), minus_step_y.contiguous()
+    v = (-params.to(x.dtype)).contiguous()
+    M, L, F1 = x.shape
+    _c.sweeps(M, L, F1, x.data_ptr(), step.data_ptr(), minus_step_y.data_ptr(), v.data_ptr(),
+              int(sweeps))  # fmt: skip
+    return -v

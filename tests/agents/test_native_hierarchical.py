@@ -1,0 +1,210 @@
+"""The hierarchical agent's compiled step (native_hierarchical) against the library pieces.
+
+Each kernel takes the same decisions from the same uniforms as the pieces it mirrors, and its
+values and weights agree to rounding (its sums run in their own order). The agents built on
+it keep the reproducibility contract on their own: agent p alone equals agent p in a
+population, bit for bit, with either kind of kernel (tests/trainers/test_skill_chaining_run.py).
+"""
+
+import doctest
+
+import numpy as np
+import pytest
+import torch
+
+from skillchain_torch.agents import HierarchicalAgent, SkillChainingAgent, native_hierarchical
+from skillchain_torch.modules import LinearQHead
+from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate
+from skillchain_torch.options import FourierOptionQHead, MLPOptionQHead, OptionBank
+from skillchain_torch.policies import epsilon_greedy
+from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+
+F64 = torch.float64
+needs_native = pytest.mark.skipif(
+    not native_hierarchical.AVAILABLE,
+    reason="the compiled agent step was not built (no C compiler at install time)")
+KERNELS = [False, True] if native_hierarchical.AVAILABLE else [False]
+
+
+def gen(seed):
+    return torch.Generator().manual_seed(seed)
+
+
+def close(got, expected):
+    torch.testing.assert_close(got, expected, rtol=1e-10, atol=1e-10)
+
+
+def test_built_in_ci():
+    import os
+
+    if os.environ.get("CI"):
+        assert native_hierarchical.AVAILABLE, "skillchain_torch.agents._hierarchical_native failed"
+
+
+def test_doctest():
+    from skillchain_torch import native
+
+    assert doctest.testmod(native_hierarchical).failed == 0
+    assert doctest.testmod(native).failed == 0
+
+
+@needs_native
+@pytest.mark.parametrize("epsilon", [0.0, 0.3, 1.0])
+@pytest.mark.parametrize("integer", [True, False])
+def test_choose_equals_forward_mask_and_epsilon_greedy(epsilon, integer):
+    P, D, F = 300, 9, 16
+    g = gen(int(epsilon * 10) + integer)
+    head = LinearQHead(F, D, P)
+    if integer:  # exact small sums: many real ties among the values
+        head.weight.copy_(torch.randint(-1, 2, (P, D, F), generator=g).to(F64))
+        phi = torch.randint(0, 2, (P, F), generator=g).to(F64)
+    else:
+        head.weight.copy_(torch.randn(P, D, F, dtype=F64, generator=g))
+        phi = torch.randn(P, F, dtype=F64, generator=g)
+    available = torch.rand(P, D, generator=g) < 0.5
+    available[:, :5] = True  # primitives always
+    rows = torch.rand(P, generator=g) < 0.7
+    u = torch.rand(P, 4, dtype=F64, generator=g)
+    q_ref = head.forward_mask(phi, available & rows[:, None], dense=5)
+    d_ref = epsilon_greedy(q_ref, available, epsilon, u[:, :2], check=False)
+    q, d = native_hierarchical.choose(head.weight, phi, available, rows, 5, u[:, :2], epsilon)
+    close(q, q_ref)
+    assert torch.equal(d, d_ref)
+    if integer:
+        assert torch.equal(q, q_ref)
+
+
+@needs_native
+@pytest.mark.parametrize("epsilon", [0.0, 0.5])
+def test_act_equals_option_values_and_epsilon_greedy(epsilon):
+    P, K, Fo = 200, 3, 16
+    g = gen(7)
+    head = FourierOptionQHead(P, K, order=1)
+    head.weight.copy_(torch.randint(-1, 2, head.weight.shape, generator=g).to(F64))
+    code = torch.randint(0, 2, (P, Fo), generator=g).to(F64)
+    rows = torch.rand(P, generator=g) < 0.8
+    decision = torch.randint(0, 5 + K, (P,), generator=g)
+    option = torch.where(decision >= 5, decision - 5, -1)
+    u = torch.rand(P, 4, dtype=F64, generator=g)
+    before = torch.randint(0, 5, (P,), generator=g)
+    # the torch path of HierarchicalAgent._act
+    expected = decision.clamp(max=4)
+    index = (rows & (option >= 0)).nonzero()[:, 0]
+    q = head.slot_values_rows(code, option, index)
+    by_option = epsilon_greedy(q, torch.ones_like(q, dtype=torch.bool), epsilon, u[index, 2:])
+    expected = torch.where(rows, expected.index_put((index,), by_option), before)
+    got = native_hierarchical.act(head.weight, code, rows, decision, option, u[:, 2:], epsilon,
+                                  before.clone())
+    assert torch.equal(got, expected)
+
+
+@needs_native
+@pytest.mark.parametrize("gamma", [1.0, 0.9])
+@pytest.mark.parametrize("scaled", [False, True])
+def test_smdp_agrees_with_sarsa_update(gamma, scaled):
+    P, D, F = 50, 8, 20
+    g = gen(3)
+    weight = torch.randn(P, D, F, dtype=F64, generator=g)
+    phi = torch.randn(P, F, dtype=F64, generator=g)
+    decision = torch.randint(0, D, (P,), generator=g)
+    ret = torch.randn(P, dtype=F64, generator=g) * 50
+    duration = torch.randint(1, 30, (P,), generator=g)
+    q_next = torch.randn(P, dtype=F64, generator=g)
+    terminal = torch.rand(P, generator=g) < 0.3
+    active = torch.rand(P, generator=g) < 0.6
+    scale = torch.rand(F, dtype=F64, generator=g) + 0.5 if scaled else None
+    update = SarsaUpdate(0.01, gamma, step_size_scale=scale)
+    head = LinearQHead(F, D, P)
+    head.weight.copy_(weight)
+    expected = update(head, phi, decision, ret, duration, phi, decision, terminal, active=active,
+                      next_value=q_next)
+    w = weight.clone()
+    got = native_hierarchical.smdp(w, phi, decision, ret, duration, q_next, terminal, active,
+                                   update.step_size, gamma)
+    close(got, expected)
+    close(w, head.weight)
+    assert torch.equal(w[~active], weight[~active])  # inactive rows untouched
+
+
+@needs_native
+@pytest.mark.parametrize("gamma", [1.0, 0.95])
+def test_intra_option_agrees_with_intra_option_q_learning(gamma):
+    P, K = 40, 4
+    g = gen(9)
+    head = FourierOptionQHead(P, K, order=2, alpha=0.01)
+    head.weight.copy_(torch.randn(head.weight.shape, dtype=F64, generator=g))
+    obs, next_obs = torch.rand(P, 4, dtype=F64, generator=g), torch.rand(P, 4, dtype=F64,
+                                                                          generator=g)
+    action = torch.randint(0, 5, (P,), generator=g)
+    reward = torch.randn(P, dtype=F64, generator=g)
+    terminated = torch.rand(P, generator=g) < 0.2
+    contains = torch.rand(P, K, generator=g) < 0.6
+    reached = torch.rand(P, K, generator=g) < 0.3
+    learnable = torch.rand(P, K, generator=g) < 0.8
+    weight = head.weight.clone()
+    expected = IntraOptionQLearning(gamma, 500.0)(head, obs, action, reward, next_obs,
+                                                  terminated, contains, reached, learnable)
+    got = native_hierarchical.intra_option(weight, head.encode(obs), head.encode(next_obs),
+                                           action, reward, terminated, contains & learnable,
+                                           reached, 0.01, gamma, 500.0)
+    close(got, expected)
+    close(weight, head.weight)
+    assert bool((got != 0).sum() > P // 2)
+
+
+@needs_native
+def test_q_rows_equals_q_value():
+    g = gen(4)
+    head = LinearQHead(30, 7, 12)
+    head.weight.copy_(torch.randn(head.weight.shape, dtype=F64, generator=g))
+    phi = torch.randn(12, 30, dtype=F64, generator=g)
+    decision = torch.randint(0, 7, (12,), generator=g)
+    index = torch.tensor([0, 3, 11])
+    close(native_hierarchical.q_rows(head.weight, phi, decision, index),
+          head.q_value(phi, decision, index))
+
+
+# ---------------------------------------------------------------------------- agents
+BOX = dict(agent="skill-chaining", map="pinball_box", max_episode_steps=300, slots=4)
+
+
+def box_trainer(runs, seed, native, episodes=6):
+    config = TrainConfig(runs=runs, seed=seed, episodes=episodes, **BOX)
+    trainer = PopulationTrainer(config, native=native)
+    bank = OptionBank.build(runs, config.slots, seed=seed)
+    trainer.agent = SkillChainingAgent(bank, order=4, alpha=0.001, seed=seed, gestation=2,
+                                       native=native)  # fmt: skip
+    return trainer
+
+
+@needs_native
+def test_skill_chaining_run_takes_the_same_course_with_either_kernel():
+    by_kind = {native: box_trainer(2, seed=3, native=native).train() for native in KERNELS}
+    a, b = by_kind[False], by_kind[True]
+    assert a.agent.native is False and b.agent.native is True
+    assert b.agent.bank.classifier.native is True
+    assert bool(b.agent.bank.live().any())  # options were created, joined and executed
+    assert int(b.agent.bank.classifier.sweeps_done.sum()) > 0
+    assert np.array_equal(a.returns, b.returns)
+    assert torch.equal(a.agent.bank.status, b.agent.bank.status)
+    close(b.agent.q_head.weight, a.agent.q_head.weight)
+    close(b.agent.bank.q_head.weight, a.agent.bank.q_head.weight)
+    close(b.agent.bank.classifier.weight, a.agent.bank.classifier.weight)
+
+
+@needs_native
+def test_state_from_the_other_kernel_is_refused():
+    torch_agent = SkillChainingAgent.build(1, slots=2, order=1, native=False)
+    native_agent = SkillChainingAgent.build(1, slots=2, order=1, native=True)
+    with pytest.raises(ValueError, match="torch-kernel agent.*native kernels"):
+        native_agent.load_state_dict(torch_agent.state_dict())
+    native_agent.load_state_dict(SkillChainingAgent.build(1, slots=2, order=1).state_dict())
+
+
+def test_native_true_names_what_is_missing():
+    bank = OptionBank(1, 1, MLPOptionQHead(1, 1, hidden=4, layers=1),
+                      OptionBank.build(1, 1).classifier)
+    with pytest.raises(ValueError, match="Fourier option heads"):
+        HierarchicalAgent(bank, order=1, native=True)
+    agent = HierarchicalAgent(bank, order=1)  # the default falls back to torch
+    assert agent.native is False and agent.bank.classifier.native is False
