@@ -3,6 +3,7 @@
 * ``envs/pinball/_native.c``: the Pinball step (same bits as the Python-float physics);
 * ``skillchain_torch/features/_fourier_native.c``: FourierBasis's arguments (same bits);
 * ``trainers/_sarsa_native.c``: the flat Sarsa agent's per-step arithmetic;
+* ``skillchain_torch/_rng_native.c``: CounterRNG's draws (same bits);
 * ``skillchain_torch/options/_initiation_native.c``: initiation-set memberships and fits;
 * ``skillchain_torch/agents/_hierarchical_native.c``: the hierarchical agent's per-step
   arithmetic (top-level choice and SMDP update, option actions, intra-option updates).
@@ -29,6 +30,8 @@ setup(
         Extension("skillchain_torch.features._fourier_native",
                   sources=["skillchain_torch/features/_fourier_native.c"], extra_compile_args=FLAGS,
                   optional=True),
+        Extension("skillchain_torch._rng_native", sources=["skillchain_torch/_rng_native.c"],
+                  extra_compile_args=FLAGS, optional=True),
         Extension("skillchain_torch.trainers._sarsa_native",
                   sources=["trainers/_sarsa_native.c"], **SHARED),
         Extension("skillchain_torch.options._initiation_native",

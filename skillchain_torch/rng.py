@@ -22,7 +22,15 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+try:
+    from skillchain_torch import _rng_native
+except ImportError:  # built without a C compiler: the tensor path below
+    _rng_native = None
+
 _TWO64 = 1 << 64
+# CPU streams draw in C (``_rng_native.c``: the same words, so the same bits); tests switch
+# it off to compare.
+NATIVE = _rng_native is not None
 
 
 def _as_int64(value: int) -> int:
@@ -114,8 +122,28 @@ class CounterRNG:
     def device(self) -> torch.device:
         return self.seeds.device
 
+    def _draw(self, n: int, mask: Tensor | None, uniform: bool) -> Tensor | None:
+        """The compiled draw (words or uniforms), or ``None`` where it does not apply."""
+        if not (NATIVE and self.seeds.device.type == "cpu" and self.seeds.is_contiguous()
+                and self.counter.is_contiguous()):  # fmt: skip
+            return None
+        if mask is not None:
+            mask = mask.to(device="cpu", dtype=torch.bool).contiguous()
+            if mask.shape != self.seeds.shape:
+                return None  # let the tensor path broadcast or raise
+        out = torch.empty(self.population, n, dtype=torch.float64 if uniform else torch.int64)
+        counter = torch.empty_like(self.counter)
+        _rng_native.draw(self.population, n, self.seeds.data_ptr(), self.counter.data_ptr(),
+                         0 if mask is None else mask.data_ptr(), self._salt, uniform,
+                         out.data_ptr(), counter.data_ptr())  # fmt: skip
+        self.counter = counter
+        return out
+
     def bits(self, n: int, mask: Tensor | None = None) -> Tensor:
         """Draw ``n`` raw 64-bit words per agent: ``int64 [P, n]``."""
+        out = self._draw(n, mask, uniform=False)
+        if out is not None:
+            return out
         steps = self.counter[:, None] + torch.arange(n, device=self.device)
         keys = self.seeds ^ self._salt
         out = splitmix64(keys[:, None] + steps * GOLDEN_GAMMA)
@@ -127,6 +155,9 @@ class CounterRNG:
 
     def uniform(self, n: int, mask: Tensor | None = None) -> Tensor:
         """Draw ``n`` uniforms in [0, 1) per agent from the 53 high bits: ``float64 [P, n]``."""
+        out = self._draw(n, mask, uniform=True)
+        if out is not None:
+            return out
         # 53-bit integers convert to float64 exactly, and scaling by 2^-53 is exact too.
         return logical_rshift(self.bits(n, mask), 11).to(torch.float64) * 2.0**-53
 

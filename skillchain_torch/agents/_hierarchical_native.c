@@ -28,10 +28,77 @@
 #define I64(p) ((int64_t *)(uintptr_t)(p))
 #define U8(p) ((uint8_t *)(uintptr_t)(p))
 
+/* ------------------------------------------------------------------ one agent's pieces */
+
+/* Top-level values of the decisions needed at a state (the first `dense` whenever any of them
+ * is available, the others where available; all 0 unless `decide`), then the epsilon-greedy
+ * decision among the available ones. As LinearQHead.forward_mask + epsilon_greedy. */
+static int64_t choose_row(const double *w, const double *phi, const uint8_t *ok, Py_ssize_t D,
+                          Py_ssize_t F, Py_ssize_t dense, int decide, double epsilon,
+                          const double *u, double *q)
+{
+    int dense_needed = 0;
+    for (Py_ssize_t d = 0; d < dense; d++) dense_needed |= ok[d];
+    for (Py_ssize_t d = 0; d < D; d++) {
+        int need = decide && (d < dense ? dense_needed : ok[d]);
+        q[d] = need ? dot(w + d * F, phi, F) : 0.0;
+    }
+    return epsilon_greedy(q, ok, D, epsilon, u[0], u[1]);
+}
+
+/* The primitive action: min(decision, A - 1), or option `option`'s epsilon-greedy action by
+ * its values w_opt[option, a] . code. */
+static int64_t act_row(const double *w_opt, const double *code, int64_t decision,
+                       int64_t option, Py_ssize_t A, Py_ssize_t Fo, double epsilon,
+                       const double *u)
+{
+    double q[MAX_CHOICES];
+    if (option < 0) return decision < A - 1 ? decision : A - 1;
+    const double *wk = w_opt + option * A * Fo;
+    for (Py_ssize_t a = 0; a < A; a++) q[a] = dot(wk + a * Fo, code, Fo);
+    return epsilon_greedy(q, NULL, A, epsilon, u[0], u[1]);
+}
+
+/* SMDP Sarsa: delta = (R + gamma^k q_next [not terminal]) - wd . phi, wd += step * (delta phi).
+ * gamma^k is libm's pow, as Python's gamma ** k in SarsaUpdate's table. */
+static double smdp_row(double *wd, const double *phi, Py_ssize_t F, double R, int64_t k,
+                       double q_next, int terminal, const double *step, Py_ssize_t stride,
+                       double gamma, int use_gamma)
+{
+    double q_sa = dot(wd, phi, F);
+    double boot = use_gamma ? pow(gamma, (double)k) * q_next : q_next;
+    if (terminal) boot = 0.0;
+    double delta = (R + boot) - q_sa;
+    for (Py_ssize_t f = 0; f < F; f++) wd[f] += step[f * stride] * (delta * phi[f]);
+    return delta;
+}
+
+/* Intra-option Q-learning of one option (weights wk [A, Fo]) from (s, a, r, s'):
+ * target = (r + C [reached]) + gamma max_b wk[b] . x1 [neither reached nor terminated],
+ * delta = target - wk[a] . x, wk[a] += (alpha delta) x. */
+static double intra_row(double *wk, const double *x, const double *x1, int64_t a, double r,
+                        int reached, int terminated, Py_ssize_t A, Py_ssize_t Fo, double alpha,
+                        double gamma, double completion)
+{
+    double q[MAX_CHOICES];
+    double boot = 0.0;
+    if (!reached && !terminated) {
+        for (Py_ssize_t b = 0; b < A; b++) q[b] = dot(wk + b * Fo, x1, Fo);
+        boot = gamma * masked_max(q, NULL, A);
+    }
+    double target = (r + (reached ? completion : 0.0)) + boot;
+    double *wa = wk + a * Fo;
+    double delta = target - dot(wa, x, Fo);
+    double scale = alpha * delta;
+    for (Py_ssize_t f = 0; f < Fo; f++) wa[f] = wa[f] + scale * x[f];
+    return delta;
+}
+
+/* ------------------------------------------------------------------ batched pieces */
+
 /* choose(P, D, F, w, phi, available, rows, dense, u, u_stride, epsilon, q, decision):
- * for rows: q[p, d] = w[p, d] . phi[p] where available (the first `dense` decisions whenever
- * any of them is), 0 elsewhere and on other rows; then every row's epsilon-greedy decision
- * among its available ones with uniforms u[p * u_stride + 0, 1]. w [P, D, F]. */
+ * choose_row for every agent (values only for `rows`), w [P, D, F], u [P, >= 2] rows
+ * u_stride apart. */
 static PyObject *choose(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, D, F, dense, u_stride;
@@ -48,24 +115,14 @@ static PyObject *choose(PyObject *self, PyObject *args)
     const uint8_t *available = U8(av_p), *rows = U8(rows_p);
     double *q = F64(q_p);
     int64_t *decision = I64(dec_p);
-    for (Py_ssize_t p = 0; p < P; p++) {
-        const uint8_t *ok = available + p * D;
-        double *qp = q + p * D;
-        int dense_needed = 0;
-        for (Py_ssize_t d = 0; d < dense; d++) dense_needed |= ok[d];
-        for (Py_ssize_t d = 0; d < D; d++) {
-            int need = rows[p] && (d < dense ? dense_needed : ok[d]);
-            qp[d] = need ? dot(w + (p * D + d) * F, phi + p * F, F) : 0.0;
-        }
-        decision[p] = epsilon_greedy(qp, ok, D, epsilon, u[p * u_stride], u[p * u_stride + 1]);
-    }
+    for (Py_ssize_t p = 0; p < P; p++)
+        decision[p] = choose_row(w + p * D * F, phi + p * F, available + p * D, D, F, dense,
+                                 rows[p], epsilon, u + p * u_stride, q + p * D);
     Py_RETURN_NONE;
 }
 
-/* act(P, K, A, Fo, w, code, rows, decision, option, u, u_stride, epsilon, action): for rows,
- * action[p] = min(decision[p], A - 1), or where option[p] >= 0 that option's epsilon-greedy
- * action by Q_k(s, .) = w[p, k, .] . code[p] with uniforms u[p * u_stride + 0, 1].
- * w [P, K, A, Fo]; other rows keep their action. */
+/* act(P, K, A, Fo, w, code, rows, decision, option, u, u_stride, epsilon, action): act_row for
+ * the rows in `rows` (w [P, K, A, Fo]); other rows keep their action. */
 static PyObject *act(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, A, Fo, u_stride;
@@ -82,23 +139,15 @@ static PyObject *act(PyObject *self, PyObject *args)
     const uint8_t *rows = U8(rows_p);
     const int64_t *decision = I64(dec_p), *option = I64(opt_p);
     int64_t *action = I64(act_p);
-    double q[MAX_CHOICES];
-    for (Py_ssize_t p = 0; p < P; p++) {
-        if (!rows[p]) continue;
-        if (option[p] < 0) {
-            action[p] = decision[p] < A - 1 ? decision[p] : A - 1;
-            continue;
-        }
-        const double *wk = w + (p * K + option[p]) * A * Fo;
-        for (Py_ssize_t a = 0; a < A; a++) q[a] = dot(wk + a * Fo, code + p * Fo, Fo);
-        action[p] = epsilon_greedy(q, NULL, A, epsilon, u[p * u_stride], u[p * u_stride + 1]);
-    }
+    for (Py_ssize_t p = 0; p < P; p++)
+        if (rows[p])
+            action[p] = act_row(w + p * K * A * Fo, code + p * Fo, decision[p], option[p], A,
+                                Fo, epsilon, u + p * u_stride);
     Py_RETURN_NONE;
 }
 
 /* smdp(P, D, F, w, phi, decision, ret, duration, q_next, terminal, active, step, step_stride,
- * gamma, use_gamma, delta): for active rows, delta = (R + gamma^k Q(s', d') [not terminal])
- * - w[p, d] . phi[p] and w[p, d] += step * (delta * phi[p]); delta 0 on other rows. */
+ * gamma, use_gamma, delta): smdp_row for the active rows; delta 0 on the others. */
 static PyObject *smdp(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, D, F, step_stride;
@@ -110,30 +159,19 @@ static PyObject *smdp(PyObject *self, PyObject *args)
                           &use_gamma, &delta_p))
         return NULL;
     double *w = F64(w_p), *delta = F64(delta_p);
-    const double *phi = F64(phi_p), *ret = F64(ret_p), *q_next = F64(qn_p), *step = F64(step_p);
+    const double *phi = F64(phi_p), *ret = F64(ret_p), *q_next = F64(qn_p);
     const int64_t *decision = I64(dec_p), *duration = I64(dur_p);
     const uint8_t *terminal = U8(term_p), *active = U8(act_p);
-    for (Py_ssize_t p = 0; p < P; p++) {
-        if (!active[p]) {
-            delta[p] = 0.0;
-            continue;
-        }
-        double *wd = w + (p * D + decision[p]) * F;
-        const double *x = phi + p * F;
-        double q_sa = dot(wd, x, F);
-        double boot = use_gamma ? pow(gamma, (double)duration[p]) * q_next[p] : q_next[p];
-        if (terminal[p]) boot = 0.0;
-        double d = (ret[p] + boot) - q_sa;
-        for (Py_ssize_t f = 0; f < F; f++) wd[f] += step[f * step_stride] * (d * x[f]);
-        delta[p] = d;
-    }
+    for (Py_ssize_t p = 0; p < P; p++)
+        delta[p] = active[p] ? smdp_row(w + (p * D + decision[p]) * F, phi + p * F, F, ret[p],
+                                        duration[p], q_next[p], terminal[p], F64(step_p),
+                                        step_stride, gamma, use_gamma)
+                             : 0.0;
     Py_RETURN_NONE;
 }
 
 /* intra_option(P, K, A, Fo, w, code, next_code, action, reward, terminated, mask, reached,
- * alpha, gamma, completion, delta): for every (p, k) in mask, target = (r + C [reached])
- * + gamma max_a w[p, k, a] . next_code[p] [neither reached nor terminated], delta = target
- * - w[p, k, a_p] . code[p], w[p, k, a_p] += (alpha * delta) * code[p]; delta 0 elsewhere. */
+ * alpha, gamma, completion, delta): intra_row for every (p, k) in mask; delta 0 elsewhere. */
 static PyObject *intra_option(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, A, Fo;
@@ -151,29 +189,14 @@ static PyObject *intra_option(PyObject *self, PyObject *args)
     const double *code = F64(code_p), *next_code = F64(next_p), *reward = F64(r_p);
     const int64_t *action = I64(act_p);
     const uint8_t *terminated = U8(term_p), *mask = U8(mask_p), *reached = U8(reach_p);
-    double q[MAX_CHOICES];
-    for (Py_ssize_t p = 0; p < P; p++) {
-        const double *x = code + p * Fo, *x1 = next_code + p * Fo;
+    for (Py_ssize_t p = 0; p < P; p++)
         for (Py_ssize_t k = 0; k < K; k++) {
             Py_ssize_t s = p * K + k;
-            if (!mask[s]) {
-                delta[s] = 0.0;
-                continue;
-            }
-            double *wk = w + s * A * Fo;
-            double boot = 0.0;
-            if (!reached[s] && !terminated[p]) {
-                for (Py_ssize_t a = 0; a < A; a++) q[a] = dot(wk + a * Fo, x1, Fo);
-                boot = gamma * masked_max(q, NULL, A);
-            }
-            double target = (reward[p] + (reached[s] ? completion : 0.0)) + boot;
-            double *wa = wk + action[p] * Fo;
-            double d = target - dot(wa, x, Fo);
-            double scale = alpha * d;
-            for (Py_ssize_t f = 0; f < Fo; f++) wa[f] = wa[f] + scale * x[f];
-            delta[s] = d;
+            delta[s] = mask[s] ? intra_row(w + s * A * Fo, code + p * Fo, next_code + p * Fo,
+                                           action[p], reward[p], reached[s], terminated[p], A,
+                                           Fo, alpha, gamma, completion)
+                               : 0.0;
         }
-    }
     Py_RETURN_NONE;
 }
 
@@ -195,12 +218,140 @@ static PyObject *q_rows(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* ------------------------------------------------------------------ the whole transition */
+
+/* step(P, K, A, F, Fo, w, w_opt, obs, code, contains, phi, decision, option, action, ret,
+ *      duration, next_obs, reward, terminated, truncated, stepped, contains_next, reached,
+ *      phi_next, next_code, status, u, epsilon, option_epsilon, gamma, use_gamma,
+ *      max_option_steps, alpha_o, completion, step, step_stride, executable_from,
+ *      out_obs, out_code, out_contains, out_phi, out_decision, out_option, out_action,
+ *      out_ret, out_duration, q, d_next, decision_ended, option_delta, smdp_delta,
+ *      info_duration, info_return, started)
+ *
+ * HierarchicalAgent.transition for every row, given what needs torch or Python at s'
+ * (memberships, targets, features, uniforms [P, 4]): the intra-option updates, the decision's
+ * return and duration, the end of executions, the top-level choice at s', the SMDP update, the
+ * new state and the next primitive action, in the torch path's order. The state at s is read
+ * only; the state at s' goes to the out_ arrays (fresh, as the torch path replaces its state
+ * tensors). Rows outside `stepped` keep their state. `status` [P, K]: live slots are != 0,
+ * available ones >= executable_from (and contain s'). q [P, D]: the values the decision at s'
+ * was taken with (rows whose decision ended; 0 elsewhere); `started`: rows starting an option.
+ * A counts both the primitive decisions and the option heads' actions. */
+static PyObject *step(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K, A, F, Fo, step_stride;
+    unsigned long long w_p, wo_p, obs_p, code_p, con_p, phi_p, dec_p, opt_p, act_p, ret_p,
+        dur_p, nobs_p, rew_p, term_p, trunc_p, st_p, conn_p, reach_p, phin_p, coden_p,
+        status_p, u_p, step_p, o_obs, o_code, o_con, o_phi, o_dec, o_opt, o_act, o_ret, o_dur,
+        q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p;
+    double epsilon, option_epsilon, gamma, alpha_o, completion;
+    int use_gamma;
+    long long max_option_steps, executable_from;
+    if (!PyArg_ParseTuple(args,
+                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKK",
+                          &P, &K, &A, &F, &Fo, &w_p, &wo_p, &obs_p, &code_p, &con_p, &phi_p,
+                          &dec_p, &opt_p, &act_p, &ret_p, &dur_p, &nobs_p, &rew_p, &term_p,
+                          &trunc_p, &st_p, &conn_p, &reach_p, &phin_p, &coden_p, &status_p,
+                          &u_p, &epsilon, &option_epsilon, &gamma, &use_gamma,
+                          &max_option_steps, &alpha_o, &completion, &step_p, &step_stride,
+                          &executable_from, &o_obs, &o_code, &o_con, &o_phi, &o_dec, &o_opt,
+                          &o_act, &o_ret, &o_dur, &q_p, &dn_p, &de_p, &od_p, &sd_p, &id_p,
+                          &ir_p, &started_p))
+        return NULL;
+    Py_ssize_t D = A + K;
+    if (D > MAX_CHOICES) {
+        PyErr_SetString(PyExc_ValueError, "step: at most 64 decisions");
+        return NULL;
+    }
+    double *w = F64(w_p), *w_opt = F64(wo_p);
+    const double *obs = F64(obs_p), *code = F64(code_p), *phi = F64(phi_p), *ret = F64(ret_p);
+    const double *next_obs = F64(nobs_p), *reward = F64(rew_p), *phi_next = F64(phin_p);
+    const double *next_code = F64(coden_p), *u = F64(u_p), *step_size = F64(step_p);
+    const int64_t *decision = I64(dec_p), *option = I64(opt_p), *action = I64(act_p);
+    const int64_t *duration = I64(dur_p), *status = I64(status_p);
+    const uint8_t *contains = U8(con_p), *terminated = U8(term_p), *truncated = U8(trunc_p);
+    const uint8_t *stepped = U8(st_p), *contains_next = U8(conn_p), *reached = U8(reach_p);
+    double *out_obs = F64(o_obs), *out_code = F64(o_code), *out_phi = F64(o_phi);
+    double *out_ret = F64(o_ret), *q = F64(q_p), *option_delta = F64(od_p);
+    double *smdp_delta = F64(sd_p), *info_return = F64(ir_p);
+    int64_t *out_decision = I64(o_dec), *out_option = I64(o_opt), *out_action = I64(o_act);
+    int64_t *out_duration = I64(o_dur), *d_next = I64(dn_p), *info_duration = I64(id_p);
+    uint8_t *out_contains = U8(o_con), *decision_ended = U8(de_p), *started = U8(started_p);
+    uint8_t ok[MAX_CHOICES];
+
+    for (Py_ssize_t p = 0; p < P; p++) {
+        int go = stepped[p], term = go && terminated[p], ended = term || (go && truncated[p]);
+        const double *x = code + p * Fo, *x1 = next_code + p * Fo, *up = u + p * 4;
+        const int64_t *st = status + p * K;
+        const uint8_t *reach = reached + p * K, *in_next = contains_next + p * K;
+        double r = go ? reward[p] : 0.0;
+
+        /* Intra-option Q-learning: every live option whose initiation set holds s. */
+        for (Py_ssize_t k = 0; k < K; k++) {
+            Py_ssize_t s = p * K + k;
+            option_delta[s] = go && contains[s] && st[k] != 0
+                ? intra_row(w_opt + s * A * Fo, x, x1, action[p], r, reach[k], term, A, Fo,
+                            alpha_o, gamma, completion)
+                : 0.0;
+        }
+
+        /* The decision in force accumulates the (discounted) reward; has it ended? */
+        double R = ret[p];
+        int64_t k_steps = duration[p];
+        if (go) {
+            R = use_gamma ? R + pow(gamma, (double)k_steps) * r : R + r;
+            k_steps += 1;
+        }
+        int executing = option[p] >= 0;
+        int stops = executing && (reach[option[p]] || k_steps >= max_option_steps);
+        int dec_end = go && (!executing || stops || ended);
+        decision_ended[p] = (uint8_t)dec_end;
+        info_duration[p] = k_steps;
+        info_return[p] = R;
+
+        /* Next top-level decision at s' (also the bootstrap decision d'), then SMDP Sarsa. */
+        for (Py_ssize_t d = 0; d < D; d++)
+            ok[d] = d < A ? 1 : (st[d - A] >= executable_from && in_next[d - A]);
+        double *qp = q + p * D;
+        int64_t dn = choose_row(w + p * D * F, phi_next + p * F, ok, D, F, A, dec_end,
+                                epsilon, up, qp);
+        d_next[p] = dn;
+        smdp_delta[p] = dec_end ? smdp_row(w + (p * D + decision[p]) * F, phi + p * F, F, R,
+                                           k_steps < 1 ? 1 : k_steps, qp[dn], term, step_size,
+                                           step_stride, gamma, use_gamma)
+                                : 0.0;
+
+        /* The state at s'. */
+        const double *s_obs = go ? next_obs + p * 4 : obs + p * 4;
+        for (int j = 0; j < 4; j++) out_obs[p * 4 + j] = s_obs[j];
+        const double *c_new = go ? x1 : x;
+        for (Py_ssize_t f = 0; f < Fo; f++) out_code[p * Fo + f] = c_new[f];
+        for (Py_ssize_t k = 0; k < K; k++)
+            out_contains[p * K + k] = go ? in_next[k] : contains[p * K + k];
+        int fresh = dec_end && !ended;
+        int64_t dec = fresh ? dn : decision[p];
+        int64_t opt = ended ? -1 : fresh ? (dn >= A ? dn - A : -1) : option[p];
+        const double *phi_new = fresh ? phi_next + p * F : phi + p * F;
+        for (Py_ssize_t f = 0; f < F; f++) out_phi[p * F + f] = phi_new[f];
+        out_ret[p] = fresh ? 0.0 : R;
+        out_duration[p] = fresh ? 0 : k_steps;
+        out_decision[p] = dec;
+        out_option[p] = opt;
+        started[p] = (uint8_t)(fresh && dn >= A);
+        out_action[p] = go && !ended
+            ? act_row(w_opt + p * K * A * Fo, c_new, dec, opt, A, Fo, option_epsilon, up + 2)
+            : action[p];
+    }
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"choose", choose, METH_VARARGS, "Top-level values and epsilon-greedy decisions."},
     {"act", act, METH_VARARGS, "Primitive actions: the decision's, or the option's choice."},
     {"smdp", smdp, METH_VARARGS, "SMDP Sarsa updates of the decisions that ended."},
     {"intra_option", intra_option, METH_VARARGS, "Intra-option Q-learning updates."},
     {"q_rows", q_rows, METH_VARARGS, "Q(s, d) of some agents."},
+    {"step", step, METH_VARARGS, "HierarchicalAgent.transition for every row."},
     {NULL, NULL, 0, NULL},
 };
 

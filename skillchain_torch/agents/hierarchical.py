@@ -61,6 +61,7 @@ from skillchain_torch.options import (
     FourierOptionQHead,
     GoalEvent,
     OptionBank,
+    OptionStatus,
     TerminationPredicate,
     native_initiation,
 )
@@ -198,6 +199,7 @@ class HierarchicalAgent(nn.Module):
             "the compiled kernels": _native.AVAILABLE and native_initiation.AVAILABLE,
             "the CPU": bank.status.device.type == "cpu",
             "Fourier option heads": fourier,
+            f"{NUM_PRIMITIVES} option actions": bank.q_head.num_actions == NUM_PRIMITIVES,
             "float64 option heads and classifier": (not fourier or bank.q_head.weight.dtype == f64)
             and bank.classifier.weight.dtype == f64,
             "a float completion_reward": not isinstance(completion_reward, Tensor),
@@ -319,6 +321,11 @@ class HierarchicalAgent(nn.Module):
         self.decision_return = torch.where(rows, torch.zeros_like(self.decision_return),
                                            self.decision_return)
         self.duration = torch.where(rows, torch.zeros_like(self.duration), self.duration)
+        self._options_starting(rows & (decision >= NUM_PRIMITIVES))
+
+    def _options_starting(self, rows: Tensor) -> None:
+        """Agents ``rows [P]`` just took an option as their new decision (a hook: skill
+        chaining snapshots the option's weights once the step's updates are done)."""
 
     def transition(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
                    truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:
@@ -331,6 +338,8 @@ class HierarchicalAgent(nn.Module):
         ``option_delta [P, K]`` (intra-option TD errors, 0 outside the initiation sets) and
         ``reached [P, K]`` (each option's target event at ``s'``).
         """
+        if self.native:
+            return self._transition_native(next_obs, reward, terminated, truncated, stepped)
         bank = self.bank
         terminated = terminated.to(torch.bool) & stepped
         truncated = truncated.to(torch.bool) & stepped
@@ -342,18 +351,11 @@ class HierarchicalAgent(nn.Module):
         reached = self.targets(next_obs, terminated, contains_next)
         # Intra-option Q-learning: every live option whose initiation set holds s.
         phi_next, next_code = self._encode(next_obs)
-        learnable = bank.live() & stepped[:, None]
-        if self.native:
-            option_delta = _native.intra_option(
-                bank.q_head.weight, self.option_code, next_code, self.action, reward,
-                terminated, self.contains & learnable, reached.contiguous(),
-                bank.q_head.alpha, self.gamma, self.option_update.completion_reward,
-            )  # fmt: skip
-        else:
-            option_delta = self.option_update(
-                bank.q_head, self.obs, self.action, reward, next_obs, terminated, self.contains,
-                reached, learnable=learnable, code=self.option_code, next_code=next_code,
-            )  # fmt: skip
+        option_delta = self.option_update(
+            bank.q_head, self.obs, self.action, reward, next_obs, terminated, self.contains,
+            reached, learnable=bank.live() & stepped[:, None], code=self.option_code,
+            next_code=next_code,
+        )
         # The decision in force accumulates the (discounted) reward.
         if self.gamma == 1.0:  # gamma^k = 1 exactly: skip the power
             ret = self.decision_return + reward
@@ -372,15 +374,9 @@ class HierarchicalAgent(nn.Module):
                                         rows=decision_ended)  # fmt: skip
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
-        if self.native:
-            smdp_delta = _native.smdp(self.q_head.weight, self.decision_phi, self.decision,
-                                      self.decision_return, self.duration.clamp(min=1), q_next,
-                                      terminated, decision_ended, self.update.step_size,
-                                      self.gamma)  # fmt: skip
-        else:
-            smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
-                                     self.decision_return, self.duration.clamp(min=1), phi_next,
-                                     d_next, terminated, active=decision_ended, next_value=q_next)
+        smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
+                                 self.decision_return, self.duration.clamp(min=1), phi_next,
+                                 d_next, terminated, active=decision_ended, next_value=q_next)
         # The state tensors are replaced, never written in place, so no copies are needed.
         info = {"decision_ended": decision_ended, "duration": self.duration,
                 "decision_return": self.decision_return, "option_delta": option_delta,
@@ -393,6 +389,31 @@ class HierarchicalAgent(nn.Module):
         self._new_decisions(decision_ended & ~ended, phi_next, d_next)
         self.option = torch.where(ended, torch.full_like(self.option, -1), self.option)
         self._act(continuing, u[:, 2:])
+        return info
+
+    def _transition_native(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
+                           truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:  # fmt: skip
+        """:meth:`transition` with its arithmetic in one compiled pass
+        (:func:`~.native_hierarchical.step`): what stays here is what a subclass or the user
+        may change (memberships, target events) and the features and uniforms of ``s'``."""
+        terminated = terminated.to(torch.bool) & stepped
+        truncated = truncated.to(torch.bool) & stepped
+        next_obs = torch.where(stepped[:, None], next_obs, self.obs)
+        contains_next = self.membership(next_obs)
+        reached = self.targets(next_obs, terminated, contains_next)
+        phi_next, next_code = self._encode(next_obs)
+        u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
+        out = _native.step(self, next_obs, reward.to(torch.float64).contiguous(), terminated,
+                           truncated, stepped, contains_next, reached.contiguous(), phi_next,
+                           next_code, u, int(OptionStatus.LEARNING))  # fmt: skip
+        info = {"decision_ended": out["decision_ended"], "duration": out["info_duration"],
+                "decision_return": out["info_return"], "option_delta": out["option_delta"],
+                "smdp_delta": out["smdp_delta"], "decision": self.decision,
+                "option": self.option, "reached": reached}  # fmt: skip
+        for name in _native.STATE:
+            setattr(self, name, out[name])
+        self.last_phi, self.last_q = phi_next, out["q"]
+        self._options_starting(out["started"])
         return info
 
     # ------------------------------------------------------------------ protocol

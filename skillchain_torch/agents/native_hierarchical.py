@@ -12,6 +12,9 @@ library pieces they mirror:
 :func:`intra_option`  :class:`~skillchain_torch.objectives.IntraOptionQLearning` on a
                     :class:`~skillchain_torch.options.FourierOptionQHead` (float ``C``)
 :func:`q_rows`      ``LinearQHead.q_value`` of some agents
+:func:`step`        the whole of ``HierarchicalAgent.transition`` after the memberships,
+                    targets, features and uniforms of ``s'``: the pieces above in its order,
+                    one pass per agent
 ==================  =======================================================================
 
 The decisions follow the same rules with the same uniforms; the sums run in a fixed order of
@@ -47,7 +50,7 @@ try:
 except ImportError:  # built without a C compiler: the agent keeps its torch path
     _c = None
 
-__all__ = ["AVAILABLE", "choose", "act", "smdp", "intra_option", "q_rows"]
+__all__ = ["AVAILABLE", "choose", "act", "smdp", "intra_option", "q_rows", "step"]
 
 AVAILABLE = _c is not None
 
@@ -111,4 +114,54 @@ def q_rows(w: Tensor, phi: Tensor, decision: Tensor, index: Tensor) -> Tensor:
     out = torch.empty(index.shape[0], dtype=torch.float64)
     _c.q_rows(index.shape[0], index.data_ptr(), D, F, w.data_ptr(), phi.data_ptr(),
               decision.data_ptr(), out.data_ptr())  # fmt: skip
+    return out
+
+
+# The agent's per-step state, in the order step() reads and writes it.
+STATE = ("obs", "option_code", "contains", "decision_phi", "decision", "option", "action",
+          "decision_return", "duration")
+
+
+def step(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
+         stepped: Tensor, contains_next: Tensor, reached: Tensor, phi_next: Tensor,
+         next_code: Tensor, uniforms: Tensor, executable_from: int) -> dict[str, Tensor]:
+    """``agent``'s transition for every row (its weights updated in place).
+
+    Returns the state at ``s'`` under the agent's attribute names (fresh tensors) plus
+    ``q [P, D]`` (the values the decision at ``s'`` was taken with), ``d_next``,
+    ``decision_ended``, ``option_delta [P, K]``, ``smdp_delta``, ``info_duration``,
+    ``info_return`` (the decision's k and R before a new decision resets them) and ``started``
+    (rows that start an option). ``next_obs`` must already hold ``s`` on rows not stepped.
+    """
+    bank, head = agent.bank, agent.q_head
+    P, D, F = head.weight.shape
+    _, K, A, Fo = bank.q_head.weight.shape
+    f64, i64 = dict(dtype=torch.float64), dict(dtype=torch.int64)
+    out = {
+        "obs": torch.empty(P, 4, **f64), "option_code": torch.empty(P, Fo, **f64),
+        "contains": torch.empty(P, K, dtype=torch.bool), "decision_phi": torch.empty(P, F, **f64),
+        "decision": torch.empty(P, **i64), "option": torch.empty(P, **i64),
+        "action": torch.empty(P, **i64), "decision_return": torch.empty(P, **f64),
+        "duration": torch.empty(P, **i64), "q": torch.empty(P, D, **f64),
+        "d_next": torch.empty(P, **i64), "decision_ended": torch.empty(P, dtype=torch.bool),
+        "option_delta": torch.empty(P, K, **f64), "smdp_delta": torch.empty(P, **f64),
+        "info_duration": torch.empty(P, **i64), "info_return": torch.empty(P, **f64),
+        "started": torch.empty(P, dtype=torch.bool),
+    }  # fmt: skip
+    step_size = agent.update.step_size
+    gamma = agent.gamma
+    _c.step(P, K, A, F, Fo, head.weight.data_ptr(), bank.q_head.weight.data_ptr(),
+            *(getattr(agent, name).data_ptr() for name in STATE[:4]),
+            *(getattr(agent, name).data_ptr() for name in STATE[4:]),
+            next_obs.data_ptr(), reward.data_ptr(), terminated.data_ptr(), truncated.data_ptr(),
+            stepped.data_ptr(), contains_next.data_ptr(), reached.data_ptr(),
+            phi_next.data_ptr(), next_code.data_ptr(), bank.status.data_ptr(),
+            uniforms.data_ptr(), agent.epsilon, agent.option_epsilon, gamma, gamma != 1.0,
+            agent.max_option_steps, bank.q_head.alpha,
+            float(agent.option_update.completion_reward), step_size.data_ptr(),
+            1 if step_size.ndim else 0, int(executable_from),
+            *(out[name].data_ptr() for name in STATE),
+            *(out[name].data_ptr() for name in ("q", "d_next", "decision_ended", "option_delta",
+                                                "smdp_delta", "info_duration", "info_return",
+                                                "started")))  # fmt: skip
     return out

@@ -44,7 +44,7 @@ from skillchain_torch.discovery import (
 from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 
 from . import native_hierarchical as _native
-from .hierarchical import MAX_OPTION_STEPS, NUM_PRIMITIVES, HierarchicalAgent
+from .hierarchical import MAX_OPTION_STEPS, HierarchicalAgent
 
 __all__ = ["SkillChainingAgent"]
 
@@ -116,10 +116,9 @@ class SkillChainingAgent(HierarchicalAgent):
         self.q_decision = torch.where(rows, chosen, self.q_decision)
         self._begin_executions()
 
-    def _new_decisions(self, rows: Tensor, phi: Tensor, decision: Tensor) -> None:
-        super()._new_decisions(rows, phi, decision)
+    def _options_starting(self, rows: Tensor) -> None:
         # Snapshots wait until the step's updates (and any dropped ones) are done.
-        self._starts = self._starts | (rows & (decision >= NUM_PRIMITIVES))
+        self._starts = self._starts | rows
 
     def _begin_executions(self) -> None:
         self.discovery.start_executions(self._starts, self.option)

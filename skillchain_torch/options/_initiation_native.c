@@ -43,19 +43,47 @@ static int near_positive(const double *point, const double *examples, const uint
     return 0;
 }
 
-/* contains(P, K, F, C, phi, weight, bias, trained, constrained, obs, examples, labels, count,
- * dims, distance, out): out[p, k] = (logit > 0 or untrained), and for constrained slots also
- * near a stored positive. phi [P, F], weight [P, K, F], bias [P, K], obs [P, 4],
- * examples [P, K, C, 4], labels [P, K, C], count [P, K] (int64), dims uint8 [4]. */
+#define MAX_FEATURES 256
+
+/* The classifier's features of one observation, as PolynomialFeatures computes them: each a
+ * product of factors of [1, x_1, ..., x_4] taken left to right (factor_index [F, degree]),
+ * of 2 x - 1 when centred; the same operations in the same order, so the same bits. */
+static void polynomial_row(const double *obs, const int64_t *factor_index, Py_ssize_t F,
+                           Py_ssize_t degree, int centered, double *phi)
+{
+    double padded[OBS_DIM + 1];
+    padded[0] = 1.0;
+    for (int j = 0; j < OBS_DIM; j++) padded[j + 1] = centered ? 2.0 * obs[j] - 1.0 : obs[j];
+    for (Py_ssize_t f = 0; f < F; f++) {
+        const int64_t *factors = factor_index + f * degree;
+        double value = padded[factors[0]];
+        for (Py_ssize_t j = 1; j < degree; j++) value = value * padded[factors[j]];
+        phi[f] = value;
+    }
+}
+
+/* contains(P, K, F, C, factor_index, degree, centered, weight, bias, trained, constrained,
+ * obs, examples, labels, count, dims, distance, out): out[p, k] = (logit > 0 or untrained),
+ * and for constrained slots also near a stored positive. factor_index [F, degree] (int64),
+ * weight [P, K, F], bias [P, K], obs [P, 4], examples [P, K, C, 4], labels [P, K, C],
+ * count [P, K] (int64), dims uint8 [4]. */
 static PyObject *contains(PyObject *self, PyObject *args)
 {
-    Py_ssize_t P, K, F, C;
-    unsigned long long phi_p, w_p, b_p, tr_p, co_p, obs_p, ex_p, lab_p, cnt_p, dims_p, out_p;
+    Py_ssize_t P, K, F, C, degree;
+    unsigned long long fi_p, w_p, b_p, tr_p, co_p, obs_p, ex_p, lab_p, cnt_p, dims_p, out_p;
     double distance;
-    if (!PyArg_ParseTuple(args, "nnnnKKKKKKKKKKdK", &P, &K, &F, &C, &phi_p, &w_p, &b_p, &tr_p,
-                          &co_p, &obs_p, &ex_p, &lab_p, &cnt_p, &dims_p, &distance, &out_p))
+    int centered;
+    if (!PyArg_ParseTuple(args, "nnnnKniKKKKKKKKKdK", &P, &K, &F, &C, &fi_p, &degree,
+                          &centered, &w_p, &b_p, &tr_p, &co_p, &obs_p, &ex_p, &lab_p, &cnt_p,
+                          &dims_p, &distance, &out_p))
         return NULL;
-    const double *phi = (const double *)(uintptr_t)phi_p, *w = (const double *)(uintptr_t)w_p;
+    if (F > MAX_FEATURES) {
+        PyErr_SetString(PyExc_ValueError, "contains: at most 256 classifier features");
+        return NULL;
+    }
+    const int64_t *factor_index = (const int64_t *)(uintptr_t)fi_p;
+    double phi[MAX_FEATURES];
+    const double *w = (const double *)(uintptr_t)w_p;
     const double *bias = (const double *)(uintptr_t)b_p, *obs = (const double *)(uintptr_t)obs_p;
     const double *examples = (const double *)(uintptr_t)ex_p;
     const uint8_t *trained = (const uint8_t *)(uintptr_t)tr_p;
@@ -65,9 +93,10 @@ static PyObject *contains(PyObject *self, PyObject *args)
     const int64_t *count = (const int64_t *)(uintptr_t)cnt_p;
     uint8_t *out = (uint8_t *)(uintptr_t)out_p;
     for (Py_ssize_t p = 0; p < P; p++) {
+        polynomial_row(obs + p * OBS_DIM, factor_index, F, degree, centered, phi);
         for (Py_ssize_t k = 0; k < K; k++) {
             Py_ssize_t s = p * K + k;
-            int member = !trained[s] || dot(w + s * F, phi + p * F, F) + bias[s] > 0.0;
+            int member = !trained[s] || dot(w + s * F, phi, F) + bias[s] > 0.0;
             if (member && constrained[s])
                 member = near_positive(obs + p * OBS_DIM, examples + s * C * OBS_DIM,
                                        labels + s * C, (long)count[s], dims, distance);

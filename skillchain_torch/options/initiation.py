@@ -241,8 +241,9 @@ class InitiationClassifier(nn.Module):
         if self.native:
             obs = self._check_obs(obs)
             return native_initiation.contains(
-                self.phi(obs), self.weight, self.bias, self.trained, self.constrained, obs,
-                self.examples, self.labels, self.count, self._dims, self.distance)
+                self.features, self.centered, self.weight, self.bias, self.trained,
+                self.constrained, obs, self.examples, self.labels, self.count, self._dims,
+                self.distance)
         member = (self.logit(obs) > 0) | ~self.trained
         # The distance test (C stored examples per slot) only where the logit said yes.
         check = self.constrained & member

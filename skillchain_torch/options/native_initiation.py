@@ -28,6 +28,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from skillchain_torch.features import PolynomialFeatures
 from skillchain_torch.options.logistic import sweep_terms
 
 try:
@@ -41,21 +42,22 @@ AVAILABLE = _c is not None
 OBS_DIM = 4
 
 
-def contains(phi: Tensor, weight: Tensor, bias: Tensor, trained: Tensor, constrained: Tensor,
-             obs: Tensor, examples: Tensor, labels: Tensor, count: Tensor,
-             dims: Tensor, distance: float) -> Tensor:  # fmt: skip
+def contains(features: PolynomialFeatures, centered: bool, weight: Tensor, bias: Tensor,
+             trained: Tensor, constrained: Tensor, obs: Tensor, examples: Tensor,
+             labels: Tensor, count: Tensor, dims: Tensor, distance: float) -> Tensor:  # fmt: skip
     """``BoolTensor [P, K]``: the classifier's membership rule for ``obs [P, 4]``.
 
-    ``phi [P, F]``: the classifier's features of ``obs``; the others are its parameters and
-    stores as they are (contiguous CPU float64; ``dims``: bool ``[4]``, the distance's dims).
+    ``features``: the classifier's :class:`PolynomialFeatures` (computed here, with the same
+    bits, of ``2 obs - 1`` if ``centered``); the others are its parameters and stores as they
+    are (contiguous CPU float64; ``dims``: bool ``[4]``, the distance's dims).
     """
     P, K, F = weight.shape
     out = torch.empty(P, K, dtype=torch.bool)
-    phi, obs = phi.contiguous(), obs.contiguous()
-    _c.contains(P, K, F, examples.shape[2], phi.data_ptr(), weight.data_ptr(), bias.data_ptr(),
-                trained.data_ptr(), constrained.data_ptr(), obs.data_ptr(),
-                examples.data_ptr(), labels.data_ptr(), count.data_ptr(), dims.data_ptr(),
-                float(distance), out.data_ptr())  # fmt: skip
+    obs, factors = obs.contiguous(), features.factor_index
+    _c.contains(P, K, F, examples.shape[2], factors.data_ptr(), factors.shape[1], centered,
+                weight.data_ptr(), bias.data_ptr(), trained.data_ptr(), constrained.data_ptr(),
+                obs.data_ptr(), examples.data_ptr(), labels.data_ptr(), count.data_ptr(),
+                dims.data_ptr(), float(distance), out.data_ptr())  # fmt: skip
     return out
 
 

@@ -168,3 +168,22 @@ def test_state_dict_roundtrip():
     restored.load_state_dict(rng.state_dict())
     assert torch.equal(restored.uniform(5), rng.uniform(5))
     assert restored.stream == 2 and repr(restored) == "CounterRNG(population=4, stream=2)"
+
+
+@pytest.mark.skipif(not skillchain_torch.rng.NATIVE, reason="the compiled draw was not built")
+@pytest.mark.parametrize("stream", [0, 1, 7])
+def test_compiled_draws_equal_the_tensor_path(stream, monkeypatch):
+    """The C draw gives the tensor path's words and uniforms bit for bit, counters included."""
+    seeds = torch.tensor([0, 1, -5, 2**62 + 3, -(2**63), 2**63 - 1])
+    mask = torch.tensor([True, False, True, True, False, True])
+
+    def draws(native):
+        monkeypatch.setattr(skillchain_torch.rng, "NATIVE", native)
+        rng = CounterRNG(seeds, stream=stream, counter=torch.tensor([0, 5, 2**40, 9, 1, 2**62]))
+        out = [rng.bits(3), rng.uniform(4, mask=mask), rng.uniform(1), rng.bits(2, mask=mask)]
+        return out, rng.counter
+
+    (native_out, native_counter), (tensor_out, tensor_counter) = draws(True), draws(False)
+    for a, b in zip(native_out, tensor_out):
+        assert a.dtype == b.dtype and torch.equal(a, b)
+    assert torch.equal(native_counter, tensor_counter)
