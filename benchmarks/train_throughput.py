@@ -13,8 +13,9 @@ same physics (``scalar.step_one``), one agent, written below as one would write 
 ratios are ours / peer, measured in the same invocation.
 
 The skill-chaining rows time agents with options live against flat agents of the same
-population size, in alternating chunks (``--rounds``), and report the median cost per agent
-step and its range over the rounds.
+population size and the same kind (compiled kernels, the default, or torch only), in
+alternating chunks (``--rounds``), and report the median cost per agent step and its range
+over the rounds.
 
 The last line times a whole population run (``--full``: 100 agents x 250 episodes, the paper's
 experiment; default: 100 agents x 5 episodes, said so in the output).
@@ -33,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skillchain_torch import rng
 from skillchain_torch.envs.pinball import load_map
 from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
 from skillchain_torch.features import fourier
@@ -59,13 +61,15 @@ def time_trainer(population: int, agent_steps: int, threads: int, repeats: int =
 
 @contextlib.contextmanager
 def compiled_features(on: bool):
-    """FourierBasis's compiled arguments on or off (a global switch; the same bits either way)."""
-    saved = fourier.NATIVE
+    """FourierBasis's compiled arguments and CounterRNG's compiled draws on or off (global
+    switches; the same bits either way)."""
+    saved = fourier.NATIVE, rng.NATIVE
     fourier.NATIVE = on and fourier._fourier_native is not None
+    rng.NATIVE = on and rng._rng_native is not None
     try:
         yield
     finally:
-        fourier.NATIVE = saved
+        fourier.NATIVE, rng.NATIVE = saved
 
 
 class NumpySarsa:
@@ -117,7 +121,8 @@ class NumpySarsa:
 OPTIONS = Path(__file__).parent / "data" / "skill_chaining_options.pt"
 
 
-def skill_chaining_trainer(population: int, threads: int, seed: int = 0) -> PopulationTrainer:
+def skill_chaining_trainer(population: int, threads: int, seed: int = 0,
+                           native: bool | None = None) -> PopulationTrainer:  # fmt: skip
     """Skill-chaining agents with options live, warmed up.
 
     Every agent starts with the options one agent discovered in a real run
@@ -126,43 +131,44 @@ def skill_chaining_trainer(population: int, threads: int, seed: int = 0) -> Popu
     chain of depth 3, 2 learned) and discovery stays on, so the timed steps pay for everything
     options cost: classifier and target evaluations, option policies, intra-option updates,
     examples, a 100-sweep refit after every execution, and new options. The top level starts
-    at zero, so options are tried often: a heavy case.
+    at zero, so options are tried often: a heavy case. ``native=False``: torch and Python only.
     """
     from skillchain_torch.options import OptionBank
 
     cfg = TrainConfig(agent="skill-chaining", map=MAP, runs=population, episodes=10_000,
                       seed=seed, slots=12)  # fmt: skip
-    trainer = PopulationTrainer(cfg, num_threads=threads)
+    trainer = PopulationTrainer(cfg, num_threads=threads, native=native)
     seeds = torch.arange(population, dtype=torch.int64) + seed
     given = OptionBank.from_agent(OPTIONS, 0, population, seeds=seeds)
     trainer.agent.bank.load_state_dict(given.state_dict())
-    trainer.train(max_agent_steps=20 * population)
+    with compiled_features(native is not False):
+        trainer.train(max_agent_steps=20 * population)
     return trainer
 
 
 def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
                 options_steps: int) -> dict[str, list[float]]:  # fmt: skip
-    """Rates of each round: flat agents with torch kernels, flat agents with the compiled
-    kernels, skill-chaining agents.
+    """Rates of each round: flat and skill-chaining agents, each with torch kernels only
+    (``*_torch``) and with the compiled ones (``*_native``, the default).
 
-    The three trainers run in alternating chunks, ``rounds`` times, so each round gives one
-    cost = (skill-chaining time per agent step) / (flat time per agent step). This machine's
-    speed drifts by tens of percent over minutes; timing them seconds apart keeps that drift
-    out of the ratio, which best-of rates taken a minute apart do not. The skill-chaining
-    agent has no compiled kernels of its own (its physics and Fourier arguments are compiled,
-    as the flat agents'), so its cost is given against both flat agents.
+    The four trainers run in alternating chunks, ``rounds`` times, so each round gives one
+    cost = (skill-chaining time per agent step) / (flat time per agent step) for each kind.
+    This machine's speed drifts by tens of percent over minutes; timing them seconds apart
+    keeps that drift out of the ratio, which best-of rates taken a minute apart do not.
     """
     trainers = {}
     for name, native in (("flat_torch", False), ("flat_native", None)):
         cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=0)
         trainers[name] = PopulationTrainer(cfg, num_threads=threads, native=native)
-        trainers[name].train(max_agent_steps=20 * population)
-    trainers["skill_chaining"] = skill_chaining_trainer(population, threads)
+        with compiled_features(native is not False):
+            trainers[name].train(max_agent_steps=20 * population)
+    for name, native in (("sc_torch", False), ("sc_native", None)):
+        trainers[name] = skill_chaining_trainer(population, threads, native=native)
     rates = {name: [] for name in trainers}
     for _ in range(rounds):
         for name, trainer in trainers.items():
-            steps = options_steps if name == "skill_chaining" else flat_steps
-            with compiled_features(name != "flat_torch"):
+            steps = options_steps if name.startswith("sc_") else flat_steps
+            with compiled_features(not name.endswith("_torch")):
                 start, done = time.perf_counter(), trainer.agent_steps
                 trainer.train(max_agent_steps=done + steps)
             rates[name].append((trainer.agent_steps - done) / (time.perf_counter() - start))
@@ -201,24 +207,22 @@ def main() -> None:
         print(f"{population:>5} | {rate:>10,.0f} | {torch_rate:>10,.0f} | {peer:>10,.0f} | "
               f"{rate / peer:>6.2f} | {rate / torch_rate:>8.2f}")
     print("\nskill chaining with options live (12 slots), alternating with flat agents in the "
-          "same process; cost = time per agent step relative to flat (target <= 2.5 at P = 100), "
-          "median over rounds (range)")
-    print(f"{'P':>5} | {'flat torch':>10} | {'flat comp.':>10} | {'skill ch.':>9} | "
-          f"{'cost vs flat torch':>18} | {'cost vs flat compiled':>21}")
-    print(f"{'-' * 5}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 9}-|-{'-' * 18}-|-{'-' * 21}")
+          "same process; cost = time per agent step relative to flat agents of the same kind "
+          "(target <= 2.5 at P = 100), median over rounds (range)")
+    print(f"{'P':>5} | {'kind':>10} | {'flat':>10} | {'skill ch.':>9} | {'cost':>18}")
+    print(f"{'-' * 5}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 9}-|-{'-' * 18}")
     for population in (1, 100):
         flat_steps, options_steps = (1_500, 300) if population == 1 else (10_000, 5_000)
         scale = args.steps / 20_000
         rates = paired_cost(population, args.threads, args.rounds,
                             max(1, int(flat_steps * scale)),
                             max(1, int(options_steps * scale)))  # fmt: skip
-        med = {k: statistics.median(v) for k, v in rates.items()}
-        cells = []
-        for flat in ("flat_torch", "flat_native"):
-            costs = [f / o for f, o in zip(rates[flat], rates["skill_chaining"])]
-            cells.append(f"{statistics.median(costs):.2f} ({min(costs):.2f}-{max(costs):.2f})")
-        print(f"{population:>5} | {med['flat_torch']:>10,.0f} | {med['flat_native']:>10,.0f} | "
-              f"{med['skill_chaining']:>9,.0f} | {cells[0]:>18} | {cells[1]:>21}")
+        for kind, label in (("torch", "torch only"), ("native", "compiled")):
+            flat, options = rates[f"flat_{kind}"], rates[f"sc_{kind}"]
+            costs = [f / o for f, o in zip(flat, options)]
+            cell = f"{statistics.median(costs):.2f} ({min(costs):.2f}-{max(costs):.2f})"
+            print(f"{population:>5} | {label:>10} | {statistics.median(flat):>10,.0f} | "
+                  f"{statistics.median(options):>9,.0f} | {cell:>18}")
     runs, episodes = (100, 250) if args.full else (100, 5)
     wall, steps = time_population_run(runs, episodes, args.threads)
     note = "" if args.full else " (short version; --full times the paper's 100 x 250)"

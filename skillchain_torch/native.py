@@ -27,4 +27,5 @@ def check_same_kernels(state: dict, native: bool) -> None:
         raise ValueError(
             f"this state was saved by a {'native' if saved else 'torch'}-kernel agent, and "
             f"this agent uses the {'native' if native else 'torch'} kernels, whose "
-            "rounding differs: resume with the same kind (native=...)")
+            "rounding differs: resume with the same kind (native=... in Python; "
+            "skillchain train --torch-only for torch kernels)")

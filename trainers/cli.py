@@ -166,6 +166,12 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--overwrite", action="store_true", help="replace the outputs of a previous run in --out"
     )
+    train.add_argument(
+        "--torch-only",
+        action="store_true",
+        help="run without the compiled agent kernels (slower; the same decisions, but sums "
+        "rounded in torch's order: bit for bit the runs of versions before them)",
+    )
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     summary = sub.add_parser("summarize", help="print the returns table of a finished run")
     summary.add_argument("dir", type=Path, help="run directory")
@@ -254,7 +260,8 @@ def _train(parser, args) -> int:
         path = latest_checkpoint(out)
         if path is None:
             parser.error(f"--resume {out}: no checkpoint under {out / 'checkpoints'}")
-        trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads)
+        trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads,
+                                    native=False if args.torch_only else None)
         try:
             load_checkpoint(path, trainer)
         except ValueError as err:
@@ -268,7 +275,8 @@ def _train(parser, args) -> int:
         out = args.out
         _prepare_out(parser, out, args.overwrite)
         config.save_json(out / "config.json")
-        trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads)
+        trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads,
+                                    native=False if args.torch_only else None)
     return _run(trainer, out, quiet=args.quiet)
 
 
@@ -312,6 +320,7 @@ def _run(trainer, out: Path, quiet: bool) -> int:
         "agent_steps_per_second": trainer.steps_per_second(),
         "torch": torch.__version__,
         "threads": trainer.num_threads,
+        "compiled_agent": bool(getattr(trainer.agent, "native", False)),
         "machine": platform.processor() or platform.machine(),
     }
     (out / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")

@@ -200,33 +200,15 @@ static PyObject *intra_option(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
-/* q_rows(n, index, D, F, w, phi, decision, out): out[i] = w[p, decision[p]] . phi[p] with
- * p = index[i]. */
-static PyObject *q_rows(PyObject *self, PyObject *args)
-{
-    Py_ssize_t n, D, F;
-    unsigned long long idx_p, w_p, phi_p, dec_p, out_p;
-    if (!PyArg_ParseTuple(args, "nKnnKKKK", &n, &idx_p, &D, &F, &w_p, &phi_p, &dec_p, &out_p))
-        return NULL;
-    const int64_t *index = I64(idx_p), *decision = I64(dec_p);
-    const double *w = F64(w_p), *phi = F64(phi_p);
-    double *out = F64(out_p);
-    for (Py_ssize_t i = 0; i < n; i++) {
-        int64_t p = index[i];
-        out[i] = dot(w + (p * D + decision[p]) * F, phi + p * F, F);
-    }
-    Py_RETURN_NONE;
-}
-
 /* ------------------------------------------------------------------ the whole transition */
 
 /* step(P, K, A, F, Fo, w, w_opt, obs, code, contains, phi, decision, option, action, ret,
  *      duration, next_obs, reward, terminated, truncated, stepped, contains_next, reached,
- *      phi_next, next_code, status, u, epsilon, option_epsilon, gamma, use_gamma,
+ *      phi_next, next_code, columns, status, u, epsilon, option_epsilon, gamma, use_gamma,
  *      max_option_steps, alpha_o, completion, step, step_stride, executable_from,
  *      out_obs, out_code, out_contains, out_phi, out_decision, out_option, out_action,
  *      out_ret, out_duration, q, d_next, decision_ended, option_delta, smdp_delta,
- *      info_duration, info_return, started)
+ *      info_duration, info_return, started, value)
  *
  * HierarchicalAgent.transition for every row, given what needs torch or Python at s'
  * (memberships, targets, features, uniforms [P, 4]): the intra-option updates, the decision's
@@ -236,27 +218,31 @@ static PyObject *q_rows(PyObject *self, PyObject *args)
  * tensors). Rows outside `stepped` keep their state. `status` [P, K]: live slots are != 0,
  * available ones >= executable_from (and contain s'). q [P, D]: the values the decision at s'
  * was taken with (rows whose decision ended; 0 elsewhere); `started`: rows starting an option.
- * A counts both the primitive decisions and the option heads' actions. */
+ * A counts both the primitive decisions and the option heads' actions. The option heads' code
+ * of s' is next_code [P, Fo], or when that is 0 the columns [Fo] (int64) of phi_next (the
+ * heads' Fourier features among the top level's, shared_fourier_columns). value [P] (or 0):
+ * Q(s', d) of the decision d in force after the step, for stepped rows (skill chaining's
+ * gestation samples). */
 static PyObject *step(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, A, F, Fo, step_stride;
     unsigned long long w_p, wo_p, obs_p, code_p, con_p, phi_p, dec_p, opt_p, act_p, ret_p,
         dur_p, nobs_p, rew_p, term_p, trunc_p, st_p, conn_p, reach_p, phin_p, coden_p,
-        status_p, u_p, step_p, o_obs, o_code, o_con, o_phi, o_dec, o_opt, o_act, o_ret, o_dur,
-        q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p;
+        cols_p, status_p, u_p, step_p, o_obs, o_code, o_con, o_phi, o_dec, o_opt, o_act, o_ret,
+        o_dur, q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p, value_p;
     double epsilon, option_epsilon, gamma, alpha_o, completion;
     int use_gamma;
     long long max_option_steps, executable_from;
     if (!PyArg_ParseTuple(args,
-                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKK",
+                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKKK",
                           &P, &K, &A, &F, &Fo, &w_p, &wo_p, &obs_p, &code_p, &con_p, &phi_p,
                           &dec_p, &opt_p, &act_p, &ret_p, &dur_p, &nobs_p, &rew_p, &term_p,
-                          &trunc_p, &st_p, &conn_p, &reach_p, &phin_p, &coden_p, &status_p,
-                          &u_p, &epsilon, &option_epsilon, &gamma, &use_gamma,
+                          &trunc_p, &st_p, &conn_p, &reach_p, &phin_p, &coden_p, &cols_p,
+                          &status_p, &u_p, &epsilon, &option_epsilon, &gamma, &use_gamma,
                           &max_option_steps, &alpha_o, &completion, &step_p, &step_stride,
                           &executable_from, &o_obs, &o_code, &o_con, &o_phi, &o_dec, &o_opt,
                           &o_act, &o_ret, &o_dur, &q_p, &dn_p, &de_p, &od_p, &sd_p, &id_p,
-                          &ir_p, &started_p))
+                          &ir_p, &started_p, &value_p))
         return NULL;
     Py_ssize_t D = A + K;
     if (D > MAX_CHOICES) {
@@ -267,6 +253,8 @@ static PyObject *step(PyObject *self, PyObject *args)
     const double *obs = F64(obs_p), *code = F64(code_p), *phi = F64(phi_p), *ret = F64(ret_p);
     const double *next_obs = F64(nobs_p), *reward = F64(rew_p), *phi_next = F64(phin_p);
     const double *next_code = F64(coden_p), *u = F64(u_p), *step_size = F64(step_p);
+    const int64_t *columns = I64(cols_p);
+    double *value = F64(value_p);
     const int64_t *decision = I64(dec_p), *option = I64(opt_p), *action = I64(act_p);
     const int64_t *duration = I64(dur_p), *status = I64(status_p);
     const uint8_t *contains = U8(con_p), *terminated = U8(term_p), *truncated = U8(trunc_p);
@@ -281,7 +269,13 @@ static PyObject *step(PyObject *self, PyObject *args)
 
     for (Py_ssize_t p = 0; p < P; p++) {
         int go = stepped[p], term = go && terminated[p], ended = term || (go && truncated[p]);
-        const double *x = code + p * Fo, *x1 = next_code + p * Fo, *up = u + p * 4;
+        double *code_next = out_code + p * Fo;  /* the code of s' (kept only if stepped) */
+        if (next_code) {
+            for (Py_ssize_t f = 0; f < Fo; f++) code_next[f] = next_code[p * Fo + f];
+        } else {
+            for (Py_ssize_t f = 0; f < Fo; f++) code_next[f] = phi_next[p * F + columns[f]];
+        }
+        const double *x = code + p * Fo, *x1 = code_next, *up = u + p * 4;
         const int64_t *st = status + p * K;
         const uint8_t *reach = reached + p * K, *in_next = contains_next + p * K;
         double r = go ? reward[p] : 0.0;
@@ -324,8 +318,9 @@ static PyObject *step(PyObject *self, PyObject *args)
         /* The state at s'. */
         const double *s_obs = go ? next_obs + p * 4 : obs + p * 4;
         for (int j = 0; j < 4; j++) out_obs[p * 4 + j] = s_obs[j];
-        const double *c_new = go ? x1 : x;
-        for (Py_ssize_t f = 0; f < Fo; f++) out_code[p * Fo + f] = c_new[f];
+        if (!go)
+            for (Py_ssize_t f = 0; f < Fo; f++) code_next[f] = x[f];
+        const double *c_new = code_next;
         for (Py_ssize_t k = 0; k < K; k++)
             out_contains[p * K + k] = go ? in_next[k] : contains[p * K + k];
         int fresh = dec_end && !ended;
@@ -341,6 +336,10 @@ static PyObject *step(PyObject *self, PyObject *args)
         out_action[p] = go && !ended
             ? act_row(w_opt + p * K * A * Fo, c_new, dec, opt, A, Fo, option_epsilon, up + 2)
             : action[p];
+        if (value)
+            value[p] = !go      ? 0.0
+                       : dec_end ? qp[dec]
+                                 : dot(w + (p * D + dec) * F, phi_next + p * F, F);
     }
     Py_RETURN_NONE;
 }
@@ -350,7 +349,6 @@ static PyMethodDef methods[] = {
     {"act", act, METH_VARARGS, "Primitive actions: the decision's, or the option's choice."},
     {"smdp", smdp, METH_VARARGS, "SMDP Sarsa updates of the decisions that ended."},
     {"intra_option", intra_option, METH_VARARGS, "Intra-option Q-learning updates."},
-    {"q_rows", q_rows, METH_VARARGS, "Q(s, d) of some agents."},
     {"step", step, METH_VARARGS, "HierarchicalAgent.transition for every row."},
     {NULL, NULL, 0, NULL},
 };

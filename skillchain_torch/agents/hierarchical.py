@@ -216,7 +216,9 @@ class HierarchicalAgent(nn.Module):
     # parameters, buffers and submodules) costs more than the tensor maths for these.
     _PLAIN = frozenset({"obs", "contains", "decision_phi", "decision", "option", "action",
                         "decision_return", "duration", "active", "option_code", "last_q",
-                        "last_phi", "_index"})  # fmt: skip
+                        "last_phi", "last_value", "_index"})  # fmt: skip
+    # The compiled transition also returns Q(s', d) of the decision in force (last_value).
+    _WANTS_VALUE = False
 
     def __setattr__(self, name, value):
         if name in self._PLAIN:
@@ -401,18 +403,22 @@ class HierarchicalAgent(nn.Module):
         next_obs = torch.where(stepped[:, None], next_obs, self.obs)
         contains_next = self.membership(next_obs)
         reached = self.targets(next_obs, terminated, contains_next)
-        phi_next, next_code = self._encode(next_obs)
+        phi_next = self.features(next_obs)
+        # The option heads' code is picked from phi_next inside (shared_fourier_columns).
+        columns = self._code_columns
+        next_code = self.bank.q_head.encode(next_obs) if columns is None else None
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
         out = _native.step(self, next_obs, reward.to(torch.float64).contiguous(), terminated,
                            truncated, stepped, contains_next, reached.contiguous(), phi_next,
-                           next_code, u, int(OptionStatus.LEARNING))  # fmt: skip
+                           next_code, columns, u, int(OptionStatus.LEARNING),
+                           value=self._WANTS_VALUE)  # fmt: skip
         info = {"decision_ended": out["decision_ended"], "duration": out["info_duration"],
                 "decision_return": out["info_return"], "option_delta": out["option_delta"],
                 "smdp_delta": out["smdp_delta"], "decision": self.decision,
                 "option": self.option, "reached": reached}  # fmt: skip
         for name in _native.STATE:
             setattr(self, name, out[name])
-        self.last_phi, self.last_q = phi_next, out["q"]
+        self.last_phi, self.last_q, self.last_value = phi_next, out["q"], out["value"]
         self._options_starting(out["started"])
         return info
 

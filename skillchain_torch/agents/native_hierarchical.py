@@ -1,26 +1,25 @@
 """The hierarchical agent's per-step arithmetic in C (``_hierarchical_native.c``).
 
 :class:`~skillchain_torch.agents.HierarchicalAgent` with ``native=True`` (its default on CPU
-float64 with Fourier option heads, when built: :data:`AVAILABLE`) calls these instead of the
-library pieces they mirror:
+float64 with Fourier option heads, when built: :data:`AVAILABLE`) runs every transition
+through :func:`step` and starts episodes with :func:`choose` and :func:`act`. Each function
+mirrors library pieces, with the same rules and the same uniforms:
 
-==================  =======================================================================
-:func:`choose`      ``LinearQHead.forward_mask`` + :func:`~skillchain_torch.policies.
-                    epsilon_greedy` (the top-level decision)
-:func:`act`         the executing options' values (``slot_values_rows``) + epsilon-greedy
-:func:`smdp`        :class:`~skillchain_torch.objectives.SarsaUpdate` with ``next_value``
+====================  =====================================================================
+:func:`choose`        ``LinearQHead.forward_mask`` + :func:`~skillchain_torch.policies.
+                      epsilon_greedy` (the top-level decision)
+:func:`act`           the executing options' values (``slot_values_rows``) + epsilon-greedy
+:func:`smdp`          :class:`~skillchain_torch.objectives.SarsaUpdate` with ``next_value``
 :func:`intra_option`  :class:`~skillchain_torch.objectives.IntraOptionQLearning` on a
-                    :class:`~skillchain_torch.options.FourierOptionQHead` (float ``C``)
-:func:`q_rows`      ``LinearQHead.q_value`` of some agents
-:func:`step`        the whole of ``HierarchicalAgent.transition`` after the memberships,
-                    targets, features and uniforms of ``s'``: the pieces above in its order,
-                    one pass per agent
-==================  =======================================================================
+                      :class:`~skillchain_torch.options.FourierOptionQHead` (float ``C``)
+:func:`step`          the whole of ``HierarchicalAgent.transition`` after the memberships,
+                      targets, features and uniforms of ``s'``: the four pieces above (the
+                      same C row functions) in its order, one pass per agent
+====================  =====================================================================
 
-The decisions follow the same rules with the same uniforms; the sums run in a fixed order of
-their own, so values and weights agree with the torch path to rounding (tested at 1e-9
-relative), not bit for bit. Each agent's numbers depend on that agent alone, so agent p of a
-population still equals agent p alone, bit for bit.
+The sums run in a fixed order of their own, so values and weights agree with the torch path
+to rounding (tested at 1e-10), not bit for bit. Each agent's numbers depend on that agent
+alone, so agent p of a population still equals agent p alone, bit for bit.
 
 Nothing is checked here: callers pass contiguous CPU float64 tensors (int64 indices, bool
 flags) of matching shapes.
@@ -50,7 +49,7 @@ try:
 except ImportError:  # built without a C compiler: the agent keeps its torch path
     _c = None
 
-__all__ = ["AVAILABLE", "choose", "act", "smdp", "intra_option", "q_rows", "step"]
+__all__ = ["AVAILABLE", "choose", "act", "smdp", "intra_option", "step"]
 
 AVAILABLE = _c is not None
 
@@ -108,15 +107,6 @@ def intra_option(w: Tensor, code: Tensor, next_code: Tensor, action: Tensor, rew
     return delta
 
 
-def q_rows(w: Tensor, phi: Tensor, decision: Tensor, index: Tensor) -> Tensor:
-    """``Q(s_p, decision_p)`` for the agents ``index [n]``: ``[n]``."""
-    P, D, F = w.shape
-    out = torch.empty(index.shape[0], dtype=torch.float64)
-    _c.q_rows(index.shape[0], index.data_ptr(), D, F, w.data_ptr(), phi.data_ptr(),
-              decision.data_ptr(), out.data_ptr())  # fmt: skip
-    return out
-
-
 # The agent's per-step state, in the order step() reads and writes it.
 STATE = ("obs", "option_code", "contains", "decision_phi", "decision", "option", "action",
           "decision_return", "duration")
@@ -124,14 +114,17 @@ STATE = ("obs", "option_code", "contains", "decision_phi", "decision", "option",
 
 def step(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
          stepped: Tensor, contains_next: Tensor, reached: Tensor, phi_next: Tensor,
-         next_code: Tensor, uniforms: Tensor, executable_from: int) -> dict[str, Tensor]:
+         next_code: Tensor | None, columns: Tensor | None, uniforms: Tensor,
+         executable_from: int, value: bool = False) -> dict[str, Tensor]:  # fmt: skip
     """``agent``'s transition for every row (its weights updated in place).
 
-    Returns the state at ``s'`` under the agent's attribute names (fresh tensors) plus
-    ``q [P, D]`` (the values the decision at ``s'`` was taken with), ``d_next``,
+    The option heads' code of ``s'`` is ``next_code``, or (``None``) the ``columns`` of
+    ``phi_next``. Returns the state at ``s'`` under the agent's attribute names (fresh
+    tensors) plus ``q [P, D]`` (the values the decision at ``s'`` was taken with), ``d_next``,
     ``decision_ended``, ``option_delta [P, K]``, ``smdp_delta``, ``info_duration``,
-    ``info_return`` (the decision's k and R before a new decision resets them) and ``started``
-    (rows that start an option). ``next_obs`` must already hold ``s`` on rows not stepped.
+    ``info_return`` (the decision's k and R before a new decision resets them), ``started``
+    (rows that start an option) and with ``value`` Q(s', d) of the decision in force after the
+    step (stepped rows). ``next_obs`` must already hold ``s`` on rows not stepped.
     """
     bank, head = agent.bank, agent.q_head
     P, D, F = head.weight.shape
@@ -147,6 +140,7 @@ def step(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated:
         "option_delta": torch.empty(P, K, **f64), "smdp_delta": torch.empty(P, **f64),
         "info_duration": torch.empty(P, **i64), "info_return": torch.empty(P, **f64),
         "started": torch.empty(P, dtype=torch.bool),
+        "value": torch.empty(P, **f64) if value else None,
     }  # fmt: skip
     step_size = agent.update.step_size
     gamma = agent.gamma
@@ -155,7 +149,8 @@ def step(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated:
             *(getattr(agent, name).data_ptr() for name in STATE[4:]),
             next_obs.data_ptr(), reward.data_ptr(), terminated.data_ptr(), truncated.data_ptr(),
             stepped.data_ptr(), contains_next.data_ptr(), reached.data_ptr(),
-            phi_next.data_ptr(), next_code.data_ptr(), bank.status.data_ptr(),
+            phi_next.data_ptr(), 0 if next_code is None else next_code.data_ptr(),
+            0 if columns is None else columns.data_ptr(), bank.status.data_ptr(),
             uniforms.data_ptr(), agent.epsilon, agent.option_epsilon, gamma, gamma != 1.0,
             agent.max_option_steps, bank.q_head.alpha,
             float(agent.option_update.completion_reward), step_size.data_ptr(),
@@ -163,5 +158,6 @@ def step(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated:
             *(out[name].data_ptr() for name in STATE),
             *(out[name].data_ptr() for name in ("q", "d_next", "decision_ended", "option_delta",
                                                 "smdp_delta", "info_duration", "info_return",
-                                                "started")))  # fmt: skip
+                                                "started")),
+            0 if out["value"] is None else out["value"].data_ptr())  # fmt: skip
     return out

@@ -43,7 +43,6 @@ from skillchain_torch.discovery import (
 )
 from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 
-from . import native_hierarchical as _native
 from .hierarchical import MAX_OPTION_STEPS, HierarchicalAgent
 
 __all__ = ["SkillChainingAgent"]
@@ -66,6 +65,7 @@ class SkillChainingAgent(HierarchicalAgent):
     """
 
     _PLAIN = HierarchicalAgent._PLAIN | {"q_decision", "_starts"}
+    _WANTS_VALUE = True  # gestation samples Q(s, d) of the decision in force
 
     def __init__(self, bank: OptionBank, events: Sequence[TerminationPredicate] = (GoalEvent(),),
                  gestation: int = GESTATION_EPISODES, max_branching: int = MAX_BRANCHING,
@@ -140,12 +140,14 @@ class SkillChainingAgent(HierarchicalAgent):
                                         self.contains)  # fmt: skip
         # New decisions were valued before this step's update; an agent going on with its
         # option had no update this step, so its value now is the value then.
-        value_next = self.last_q.gather(1, self.decision[:, None])[:, 0]
-        going_on = (stepped & ~info["decision_ended"]).nonzero()[:, 0]
-        if going_on.numel() > 0:
-            value_next[going_on] = (
-                _native.q_rows(self.q_head.weight, self.last_phi, self.decision, going_on)
-                if self.native else self.q_head.q_value(self.last_phi, self.decision, going_on))
+        if self.native:  # the compiled transition valued them (the same rule)
+            value_next = self.last_value
+        else:
+            value_next = self.last_q.gather(1, self.decision[:, None])[:, 0]
+            going_on = (stepped & ~info["decision_ended"]).nonzero()[:, 0]
+            if going_on.numel() > 0:
+                value_next[going_on] = self.q_head.q_value(self.last_phi, self.decision,
+                                                           going_on)  # fmt: skip
         self.q_decision = torch.where(stepped, value_next, self.q_decision)
         self._begin_executions()
         return info

@@ -10,8 +10,8 @@
  * Arithmetic: native_maths.h's dot (its own fixed order: not torch's bits, the same for a
  * slot whatever the batch); the sweep keeps logistic_sweeps's expressions
  * (g = -step y + step / (1 + exp(x . v)), v += sum_l x_l g_l, summed over the examples in
- * order); distances are sqrt of the squares summed in dimension order, as cdist without the
- * matrix shortcut. Compiled with -ffp-contract=off.
+ * order); distances are compared squared (a membership can differ from torch's cdist only
+ * for a state within rounding of the radius). Compiled with -ffp-contract=off.
  *
  * Every array argument is an address (torch.Tensor.data_ptr()) of a contiguous CPU tensor;
  * flags are uint8 (torch.bool).
@@ -25,20 +25,19 @@
 
 #define OBS_DIM 4
 
-/* Within `distance` of one of the first `count` stored examples labelled positive. */
+/* Within `distance` of one of the first `count` stored examples labelled positive, in the
+ * dims flagged (squared distances against distance^2: no square root per example). */
 static int near_positive(const double *point, const double *examples, const uint8_t *labels,
                          long count, const uint8_t *dims, double distance)
 {
+    double m0 = dims[0], m1 = dims[1], m2 = dims[2], m3 = dims[3];
+    double reach = distance * distance;
     for (long c = 0; c < count; c++) {
         if (!labels[c]) continue;
         const double *e = examples + c * OBS_DIM;
-        double sum = 0.0;
-        for (int j = 0; j < OBS_DIM; j++) {
-            if (!dims[j]) continue;
-            double diff = point[j] - e[j];
-            sum += diff * diff;
-        }
-        if (sqrt(sum) <= distance) return 1;
+        double d0 = (point[0] - e[0]) * m0, d1 = (point[1] - e[1]) * m1;
+        double d2 = (point[2] - e[2]) * m2, d3 = (point[3] - e[3]) * m3;
+        if (((d0 * d0 + d1 * d1) + d2 * d2) + d3 * d3 <= reach) return 1;
     }
     return 0;
 }

@@ -152,18 +152,6 @@ def test_intra_option_agrees_with_intra_option_q_learning(gamma):
     assert bool((got != 0).sum() > P // 2)
 
 
-@needs_native
-def test_q_rows_equals_q_value():
-    g = gen(4)
-    head = LinearQHead(30, 7, 12)
-    head.weight.copy_(torch.randn(head.weight.shape, dtype=F64, generator=g))
-    phi = torch.randn(12, 30, dtype=F64, generator=g)
-    decision = torch.randint(0, 7, (12,), generator=g)
-    index = torch.tensor([0, 3, 11])
-    close(native_hierarchical.q_rows(head.weight, phi, decision, index),
-          head.q_value(phi, decision, index))
-
-
 # ---------------------------------------------------------------------------- agents
 BOX = dict(agent="skill-chaining", map="pinball_box", max_episode_steps=300, slots=4)
 

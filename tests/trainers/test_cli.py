@@ -143,3 +143,16 @@ def test_console_script_help():
         assert done.returncode == 0, done.stderr
         assert "usage: skillchain" in done.stdout
     assert "--scale-step-size" in done.stdout and "--resume DIR" in done.stdout
+
+
+def test_torch_only_run_resumes_only_as_torch_only(tmp_path, capsys):
+    """--torch-only is recorded in run_info.json, and its checkpoints refuse the other kind."""
+    from skillchain_torch.agents import native_hierarchical
+
+    out = tmp_path / "run"
+    argv = ["train", "--agent", "skill-chaining", "--slots", "2", "--out", str(out), *SMALL]
+    assert main([*argv, "--torch-only"]) == 0
+    assert json.loads((out / "run_info.json").read_text())["compiled_agent"] is False
+    if native_hierarchical.AVAILABLE:
+        _fails(["train", "--resume", str(out), "--quiet"], capsys, "--torch-only")
+    assert main(["train", "--resume", str(out), "--quiet", "--torch-only"]) == 0
