@@ -4,6 +4,7 @@
 * ``skillchain_torch/features/_fourier_native.c``: FourierBasis's arguments (same bits);
 * ``trainers/_sarsa_native.c``: the flat Sarsa agent's per-step arithmetic;
 * ``skillchain_torch/_rng_native.c``: CounterRNG's draws (same bits);
+* ``skillchain_torch/discovery/_discovery_native.c``: skill chaining's bookkeeping (same bits);
 * ``skillchain_torch/options/_initiation_native.c``: initiation-set memberships and fits;
 * ``skillchain_torch/agents/_hierarchical_native.c``: the hierarchical agent's per-step
   arithmetic (top-level choice and SMDP update, option actions, intra-option updates).
@@ -31,6 +32,9 @@ setup(
                   sources=["skillchain_torch/features/_fourier_native.c"], extra_compile_args=FLAGS,
                   optional=True),
         Extension("skillchain_torch._rng_native", sources=["skillchain_torch/_rng_native.c"],
+                  extra_compile_args=FLAGS, optional=True),
+        Extension("skillchain_torch.discovery._discovery_native",
+                  sources=["skillchain_torch/discovery/_discovery_native.c"],
                   extra_compile_args=FLAGS, optional=True),
         Extension("skillchain_torch.trainers._sarsa_native",
                   sources=["trainers/_sarsa_native.c"], **SHARED),

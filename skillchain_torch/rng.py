@@ -128,7 +128,9 @@ class CounterRNG:
                 and self.counter.is_contiguous()):  # fmt: skip
             return None
         if mask is not None:
-            mask = mask.to(device="cpu", dtype=torch.bool).contiguous()
+            if mask.dtype != torch.bool or not mask.is_cpu:
+                mask = mask.to(device="cpu", dtype=torch.bool)
+            mask = mask if mask.is_contiguous() else mask.contiguous()
             if mask.shape != self.seeds.shape:
                 return None  # let the tensor path broadcast or raise
         out = torch.empty(self.population, n, dtype=torch.float64 if uniform else torch.int64)

@@ -161,7 +161,8 @@ class ActiveEnvStepper:
         out = torch.empty(5 * n, dtype=torch.float64)
         obs, reward = out[: 4 * n].view(n, 4), out[4 * n :]
         terminated = torch.empty(n, dtype=torch.bool)
-        action = action.to(torch.long).contiguous()
+        action = action if action.dtype == torch.long else action.to(torch.long)
+        action = action if action.is_contiguous() else action.contiguous()
         # check=False: every tensor here was made (or made contiguous int64) just above.
         n_goal = self._native.step_into(state, action, reward, terminated, obs, check=False)
         return obs, reward, self._ends(terminated, n_goal > 0)

@@ -398,8 +398,12 @@ class HierarchicalAgent(nn.Module):
         """:meth:`transition` with its arithmetic in one compiled pass
         (:func:`~.native_hierarchical.step`): what stays here is what a subclass or the user
         may change (memberships, target events) and the features and uniforms of ``s'``."""
-        terminated = terminated.to(torch.bool) & stepped
-        truncated = truncated.to(torch.bool) & stepped
+        # (.to of a tensor already of the dtype costs microseconds: this runs every step)
+        terminated = (terminated if terminated.dtype == torch.bool
+                      else terminated.to(torch.bool)) & stepped  # fmt: skip
+        truncated = (truncated if truncated.dtype == torch.bool
+                     else truncated.to(torch.bool)) & stepped  # fmt: skip
+        reward = reward if reward.dtype == torch.float64 else reward.to(torch.float64)
         next_obs = torch.where(stepped[:, None], next_obs, self.obs)
         contains_next = self.membership(next_obs)
         reached = self.targets(next_obs, terminated, contains_next)
@@ -408,7 +412,7 @@ class HierarchicalAgent(nn.Module):
         columns = self._code_columns
         next_code = self.bank.q_head.encode(next_obs) if columns is None else None
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
-        out = _native.step(self, next_obs, reward.to(torch.float64).contiguous(), terminated,
+        out = _native.step(self, next_obs, reward.contiguous(), terminated,
                            truncated, stepped, contains_next, reached.contiguous(), phi_next,
                            next_code, columns, u, int(OptionStatus.LEARNING),
                            value=self._WANTS_VALUE)  # fmt: skip
@@ -425,7 +429,7 @@ class HierarchicalAgent(nn.Module):
     # ------------------------------------------------------------------ protocol
     def _full(self, rows_value: Tensor, fill: Tensor) -> Tensor:
         out = fill.clone()
-        out[self._index] = rows_value.to(out.dtype)
+        out[self._index] = rows_value if rows_value.dtype == out.dtype else rows_value.to(out.dtype)
         return out
 
     def begin(self, obs: Tensor) -> Tensor:

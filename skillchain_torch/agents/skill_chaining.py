@@ -132,7 +132,9 @@ class SkillChainingAgent(HierarchicalAgent):
         created = self.discovery.after_transition(
             contains=contains, option=option, value=value,
             contains_next=self.contains, reached=info["reached"], duration=info["duration"],
-            decision_ended=info["decision_ended"], terminated=terminated.to(torch.bool) & stepped,
+            decision_ended=info["decision_ended"],
+            terminated=(terminated if terminated.dtype == torch.bool
+                        else terminated.to(torch.bool)) & stepped,
             stepped=stepped,
         )  # fmt: skip
         if bool(created.any()):  # the new slot changes the memberships at s'

@@ -31,6 +31,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor
 
+from skillchain_torch.discovery import native_discovery
 from skillchain_torch.options import OptionBank, OptionStatus, TerminationPredicate
 
 __all__ = ["MAX_BRANCHING", "targeting", "event_list", "evaluate_base_events",
@@ -82,6 +83,9 @@ def target_indicator(bank: OptionBank, base_fired: Tensor, contains: Tensor) -> 
 
     The same answer as :meth:`OptionBank.target_reached`, without evaluating any event again.
     """
+    if native_discovery.applies(contains, bank.status):
+        return native_discovery.target_indicator(bank.parent, bank.target_event, bank.status,
+                                                 base_fired, contains)  # fmt: skip
     chained = bank.parent >= 0
     from_parent = contains.gather(1, bank.parent.clamp(min=0))
     if base_fired.shape[1] == 0:

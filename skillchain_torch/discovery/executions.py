@@ -32,6 +32,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from skillchain_torch.discovery import native_discovery
 from skillchain_torch.options import OptionQHead
 
 __all__ = ["execution_outcome", "ExecutionTrace"]
@@ -87,6 +88,9 @@ class ExecutionTrace:
 
     def record(self, rows: Tensor, step: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` as step ``step [P]`` (0-based)."""
+        if self.states.dtype == torch.float64 and native_discovery.applies(self.states, rows):
+            native_discovery.record(self.states, rows, step, obs)
+            return
         index = rows.nonzero()[:, 0]
         self.states[index, step[index].clamp(max=self.max_steps - 1)] = obs[index].to(
             self.states.dtype)

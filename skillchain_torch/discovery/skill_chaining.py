@@ -50,6 +50,7 @@ from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import GoalEvent, OptionBank, OptionStatus, TerminationPredicate
 from skillchain_torch.options.status import slot_mask
 
+from . import native_discovery
 from .convergence import CONVERGENCE_EPISODES, CONVERGENCE_THRESHOLD, ConvergenceTest
 from .creation import choose_creation, covered_start
 from .events import MAX_BRANCHING, entered, evaluate_base_events, event_list, target_indicator
@@ -185,6 +186,15 @@ class SkillChaining:
         self._finish_executions(option, reached, duration, decision_ended & stepped,
                                 terminated)  # fmt: skip
         sample = value  # Q(s, d) of the decision in force
+        if native_discovery.applies(contains, stepped):  # the same rules, compiled
+            self.gestation_q, base_trig, slot_trig, self.base_now, any_trig = (
+                native_discovery.triggers(bank.parent, bank.target_event, bank.status,
+                                          self.base_now, self._base_next, contains,
+                                          contains_next, reached, stepped, sample,
+                                          self.gestation_q))  # fmt: skip
+            if not any_trig:
+                return torch.zeros_like(stepped)
+            return self._create(base_trig, slot_trig, contains, option, sample)
         gestating = bank.status == OptionStatus.GESTATING
         if bool(gestating.any()):
             before = target_indicator(bank, self.base_now, contains)

@@ -56,7 +56,9 @@ class FourierBasis(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         """Map states ``[..., dim]`` to features ``[..., num_features]``."""
         lead = x.shape[:-1]
-        x = x.to(self._k.dtype).reshape(-1, self.dim)
+        if x.dtype != self._k.dtype:
+            x = x.to(self._k.dtype)
+        x = x.reshape(-1, self.dim)
         n = x.shape[0]
         if (NATIVE and x.device.type == "cpu" and x.dtype == torch.float64 and self.dim <= 16
                 and self.order <= 63):  # the C side's fixed-size tables

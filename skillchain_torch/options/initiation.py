@@ -181,7 +181,10 @@ class InitiationClassifier(nn.Module):
     def _check_obs(self, obs: Tensor) -> Tensor:
         if tuple(obs.shape) != (self.population, OBS_DIM):
             raise ValueError(f"obs must be [P={self.population}, 4], got {tuple(obs.shape)}")
-        return obs.to(device=self.weight.device, dtype=self.weight.dtype)
+        w = self.weight
+        if obs.dtype == w.dtype and obs.device == w.device:  # every step: skip a no-op .to
+            return obs
+        return obs.to(device=w.device, dtype=w.dtype)
 
     def phi(self, obs: Tensor) -> Tensor:
         """The classifier's features of observations ``[..., 4]`` (centred if ``centered``)."""

@@ -59,7 +59,8 @@ class GoalEvent:
         if terminated.numel() != obs.shape[0]:
             raise ValueError(f"terminated must be [P={obs.shape[0]}], got "
                              f"{tuple(terminated.shape)}")  # fmt: skip
-        return terminated.reshape(obs.shape[0]).to(torch.bool)
+        terminated = terminated.reshape(obs.shape[0])
+        return terminated if terminated.dtype == torch.bool else terminated.to(torch.bool)
 
     def __repr__(self) -> str:
         return f"GoalEvent(name={self.name!r})"

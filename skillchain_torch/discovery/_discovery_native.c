@@ -1,0 +1,163 @@
+/* Skill chaining's per-step bookkeeping, compiled (see native_discovery.py).
+ *
+ * Why it exists: every step, skill chaining derives each option's target event at s', the
+ * no-overlap memberships, the events a transition triggered, the gestating options' samples
+ * and the executions' state records, each a handful of small boolean tensor operations on
+ * [P, K] arrays: ~0.5 ms a step for an agent on its own, for a few hundred boolean tests.
+ * Everything here is booleans, copies and maxima, so the results are the torch path's bits.
+ *
+ * Every array argument is an address (torch.Tensor.data_ptr()) of a contiguous CPU tensor;
+ * flags are uint8 (torch.bool), metadata int64.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+
+#define OBS_DIM 4
+#define GESTATING 1
+#define LEARNED 3
+
+/* Option k's target event at a state: the parent's membership there for a chain link,
+ * otherwise its base event's value (target_event < 0: none); false for empty slots. */
+static int target_of(const int64_t *parent, const int64_t *target_event, const int64_t *status,
+                     const uint8_t *base, Py_ssize_t E, const uint8_t *contains, Py_ssize_t k)
+{
+    if (status[k] == 0) return 0;
+    if (parent[k] >= 0) return contains[parent[k]];
+    if (target_event[k] < 0 || E == 0) return 0;
+    return base[target_event[k] < E ? target_event[k] : E - 1];
+}
+
+/* target_indicator(P, K, E, parent, target_event, status, base_fired, contains, out) */
+static PyObject *target_indicator(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K, E;
+    unsigned long long par_p, te_p, st_p, base_p, con_p, out_p;
+    if (!PyArg_ParseTuple(args, "nnnKKKKKK", &P, &K, &E, &par_p, &te_p, &st_p, &base_p, &con_p,
+                          &out_p))
+        return NULL;
+    const int64_t *parent = (const int64_t *)(uintptr_t)par_p;
+    const int64_t *target_event = (const int64_t *)(uintptr_t)te_p;
+    const int64_t *status = (const int64_t *)(uintptr_t)st_p;
+    const uint8_t *base = (const uint8_t *)(uintptr_t)base_p;
+    const uint8_t *contains = (const uint8_t *)(uintptr_t)con_p;
+    uint8_t *out = (uint8_t *)(uintptr_t)out_p;
+    for (Py_ssize_t p = 0; p < P; p++)
+        for (Py_ssize_t k = 0; k < K; k++)
+            out[p * K + k] = (uint8_t)target_of(parent + p * K, target_event + p * K,
+                                                status + p * K, base + p * E, E,
+                                                contains + p * K, k);
+    Py_RETURN_NONE;
+}
+
+/* exclude_overlap(P, K, contains, exclusion, trained, out): out[p, k] = contains[p, k] and no
+ * j with exclusion[p, k, j] is a trained set holding the state. */
+static PyObject *exclude_overlap(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K;
+    unsigned long long con_p, ex_p, tr_p, out_p;
+    if (!PyArg_ParseTuple(args, "nnKKKK", &P, &K, &con_p, &ex_p, &tr_p, &out_p)) return NULL;
+    const uint8_t *contains = (const uint8_t *)(uintptr_t)con_p;
+    const uint8_t *exclusion = (const uint8_t *)(uintptr_t)ex_p;
+    const uint8_t *trained = (const uint8_t *)(uintptr_t)tr_p;
+    uint8_t *out = (uint8_t *)(uintptr_t)out_p;
+    for (Py_ssize_t p = 0; p < P; p++)
+        for (Py_ssize_t k = 0; k < K; k++) {
+            int in = contains[p * K + k];
+            for (Py_ssize_t j = 0; in && j < K; j++)
+                if (exclusion[(p * K + k) * K + j] && contains[p * K + j] && trained[p * K + j])
+                    in = 0;
+            out[p * K + k] = (uint8_t)in;
+        }
+    Py_RETURN_NONE;
+}
+
+/* record(P, T, rows, step, obs, states): states[p, min(step[p], T - 1)] = obs[p] for rows. */
+static PyObject *record(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, T;
+    unsigned long long rows_p, step_p, obs_p, states_p;
+    if (!PyArg_ParseTuple(args, "nnKKKK", &P, &T, &rows_p, &step_p, &obs_p, &states_p))
+        return NULL;
+    const uint8_t *rows = (const uint8_t *)(uintptr_t)rows_p;
+    const int64_t *step = (const int64_t *)(uintptr_t)step_p;
+    const double *obs = (const double *)(uintptr_t)obs_p;
+    double *states = (double *)(uintptr_t)states_p;
+    for (Py_ssize_t p = 0; p < P; p++) {
+        if (!rows[p]) continue;
+        int64_t t = step[p] < T - 1 ? step[p] : T - 1;
+        for (int j = 0; j < OBS_DIM; j++) states[(p * T + t) * OBS_DIM + j] = obs[p * OBS_DIM + j];
+    }
+    Py_RETURN_NONE;
+}
+
+/* triggers(P, K, E, parent, target_event, status, base_now, base_next, contains,
+ * contains_next, reached, stepped, sample, gestation_q, out_gestation_q, out_base_trig,
+ * out_slot_trig, out_base_now) -> bool: for the stepped rows, the base events and the LEARNED
+ * options' sets the transition entered (false at s, true at s'), and the gestating options
+ * whose target it entered take max(their sample, sample[p]); returns whether anything was
+ * triggered. */
+static PyObject *triggers(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K, E;
+    unsigned long long par_p, te_p, st_p, bn_p, bx_p, con_p, conx_p, reach_p, step_p, sam_p,
+        gq_p, ogq_p, obt_p, ost_p, obn_p;
+    if (!PyArg_ParseTuple(args, "nnnKKKKKKKKKKKKKKK", &P, &K, &E, &par_p, &te_p, &st_p, &bn_p,
+                          &bx_p, &con_p, &conx_p, &reach_p, &step_p, &sam_p, &gq_p, &ogq_p,
+                          &obt_p, &ost_p, &obn_p))
+        return NULL;
+    const int64_t *parent = (const int64_t *)(uintptr_t)par_p;
+    const int64_t *target_event = (const int64_t *)(uintptr_t)te_p;
+    const int64_t *status = (const int64_t *)(uintptr_t)st_p;
+    const uint8_t *base_now = (const uint8_t *)(uintptr_t)bn_p;
+    const uint8_t *base_next = (const uint8_t *)(uintptr_t)bx_p;
+    const uint8_t *contains = (const uint8_t *)(uintptr_t)con_p;
+    const uint8_t *contains_next = (const uint8_t *)(uintptr_t)conx_p;
+    const uint8_t *reached = (const uint8_t *)(uintptr_t)reach_p;
+    const uint8_t *stepped = (const uint8_t *)(uintptr_t)step_p;
+    const double *sample = (const double *)(uintptr_t)sam_p;
+    const double *gestation_q = (const double *)(uintptr_t)gq_p;
+    double *out_gq = (double *)(uintptr_t)ogq_p;
+    uint8_t *base_trig = (uint8_t *)(uintptr_t)obt_p, *slot_trig = (uint8_t *)(uintptr_t)ost_p;
+    uint8_t *out_base_now = (uint8_t *)(uintptr_t)obn_p;
+    int any = 0;
+    for (Py_ssize_t p = 0; p < P; p++) {
+        int go = stepped[p];
+        const int64_t *par = parent + p * K, *te = target_event + p * K, *st = status + p * K;
+        for (Py_ssize_t k = 0; k < K; k++) {
+            Py_ssize_t s = p * K + k;
+            double q = gestation_q[s];
+            if (go && st[k] == GESTATING && reached[s]
+                && !target_of(par, te, st, base_now + p * E, E, contains + p * K, k)) {
+                /* torch.maximum: NaN if either is NaN */
+                double x = sample[p];
+                q = (isnan(q) || isnan(x)) ? NAN : (x > q ? x : q);
+            }
+            out_gq[s] = q;
+            slot_trig[s] = (uint8_t)(go && !contains[s] && contains_next[s] && st[k] == LEARNED);
+            any |= slot_trig[s];
+        }
+        for (Py_ssize_t e = 0; e < E; e++) {
+            Py_ssize_t s = p * E + e;
+            base_trig[s] = (uint8_t)(go && !base_now[s] && base_next[s]);
+            any |= base_trig[s];
+            out_base_now[s] = go ? base_next[s] : base_now[s];
+        }
+    }
+    return PyBool_FromLong(any);
+}
+
+static PyMethodDef methods[] = {
+    {"target_indicator", target_indicator, METH_VARARGS, "Each option's target at a state."},
+    {"exclude_overlap", exclude_overlap, METH_VARARGS, "Memberships under the overlap rule."},
+    {"record", record, METH_VARARGS, "Executing agents' states into the trace."},
+    {"triggers", triggers, METH_VARARGS, "Entered events and gestation samples of a step."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_discovery_native",
+                                    "Compiled skill-chaining bookkeeping (see "
+                                    "native_discovery.py).", -1, methods};
+
+PyMODINIT_FUNC PyInit__discovery_native(void) { return PyModule_Create(&module); }

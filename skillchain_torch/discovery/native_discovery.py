@@ -1,0 +1,96 @@
+"""Skill chaining's per-step bookkeeping in C (``_discovery_native.c``), the same bits.
+
+The discovery pieces call these for CPU tensors when the extension is built (:data:`NATIVE`,
+a switch tests turn off to compare): :func:`~.events.target_indicator`,
+:func:`~.overlap.exclude_overlap`, :meth:`~.executions.ExecutionTrace.record` and the
+triggers and gestation samples of :meth:`~.skill_chaining.SkillChaining.after_transition`.
+They are booleans, copies and maxima, so they give the torch path's results exactly, and each
+agent's row depends on that agent alone.
+
+Example:
+    >>> import torch
+    >>> contains = torch.tensor([[True, True]])
+    >>> exclusion = torch.tensor([[[False, False], [True, False]]])  # slot 1 avoids slot 0's set
+    >>> trained = torch.tensor([[True, True]])
+    >>> exclude_overlap(contains, exclusion, trained).tolist() if NATIVE else [[True, False]]
+    [[True, False]]
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+try:
+    from skillchain_torch.discovery import _discovery_native as _c
+except ImportError:  # built without a C compiler: the torch path
+    _c = None
+
+__all__ = ["NATIVE", "applies", "target_indicator", "exclude_overlap", "record", "triggers"]
+
+NATIVE = _c is not None
+
+
+def applies(*tensors: Tensor) -> bool:
+    """The compiled path is on and every tensor is on the CPU."""
+    return NATIVE and all(t.is_cpu for t in tensors)
+
+
+def _flags(x: Tensor) -> Tensor:
+    # Called a dozen times a step: skip the conversions that would return x itself.
+    if x.dtype != torch.bool:
+        x = x.to(torch.bool)
+    return x if x.is_contiguous() else x.contiguous()
+
+
+def target_indicator(parent: Tensor, target_event: Tensor, status: Tensor, base_fired: Tensor,
+                     contains: Tensor) -> Tensor:  # fmt: skip
+    """:func:`~.events.target_indicator` from the bank's ``[P, K]`` metadata."""
+    P, K = status.shape
+    base_fired, contains = _flags(base_fired), _flags(contains)
+    parent, target_event, status = (x.contiguous() for x in (parent, target_event, status))
+    out = torch.empty(P, K, dtype=torch.bool)
+    _c.target_indicator(P, K, base_fired.shape[1], parent.data_ptr(), target_event.data_ptr(),
+                        status.data_ptr(), base_fired.data_ptr(), contains.data_ptr(),
+                        out.data_ptr())  # fmt: skip
+    return out
+
+
+def exclude_overlap(contains: Tensor, exclusion: Tensor, trained: Tensor) -> Tensor:
+    """:func:`~.overlap.exclude_overlap`."""
+    P, K = contains.shape
+    contains, exclusion, trained = _flags(contains), _flags(exclusion), _flags(trained)
+    out = torch.empty(P, K, dtype=torch.bool)
+    _c.exclude_overlap(P, K, contains.data_ptr(), exclusion.data_ptr(), trained.data_ptr(),
+                       out.data_ptr())  # fmt: skip
+    return out
+
+
+def record(states: Tensor, rows: Tensor, step: Tensor, obs: Tensor) -> None:
+    """``states[p, min(step[p], T - 1)] = obs[p]`` for ``rows`` (float64 ``states``)."""
+    P, T, _ = states.shape
+    rows, step = _flags(rows), step.to(torch.int64).contiguous()
+    obs = obs.to(torch.float64).contiguous()
+    _c.record(P, T, rows.data_ptr(), step.data_ptr(), obs.data_ptr(), states.data_ptr())
+
+
+def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Tensor,
+             base_next: Tensor, contains: Tensor, contains_next: Tensor, reached: Tensor,
+             stepped: Tensor, sample: Tensor,
+             gestation_q: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor, bool]:  # fmt: skip
+    """One step's ``(gestation_q, base_trig, slot_trig, base_now, any_trig)`` of
+    :meth:`~.skill_chaining.SkillChaining.after_transition` (new tensors)."""
+    P, K = status.shape
+    E = base_now.shape[1]
+    parent, target_event, status = (x.contiguous() for x in (parent, target_event, status))
+    flags = [_flags(x) for x in (base_now, base_next, contains, contains_next, reached, stepped)]
+    sample = sample.to(torch.float64).contiguous()
+    gestation_q = gestation_q.contiguous()  # held: C reads its address
+    out_q = torch.empty(P, K, dtype=torch.float64)
+    base_trig, slot_trig = torch.empty(P, E, dtype=torch.bool), torch.empty(P, K, dtype=torch.bool)
+    out_base_now = torch.empty(P, E, dtype=torch.bool)
+    any_trig = _c.triggers(P, K, E, parent.data_ptr(), target_event.data_ptr(), status.data_ptr(),
+                           *(x.data_ptr() for x in flags), sample.data_ptr(),
+                           gestation_q.data_ptr(), out_q.data_ptr(),
+                           base_trig.data_ptr(), slot_trig.data_ptr(), out_base_now.data_ptr())
+    return out_q, base_trig, slot_trig, out_base_now, any_trig

@@ -1,0 +1,95 @@
+"""The compiled skill-chaining bookkeeping (native_discovery) gives the torch path's bits."""
+
+import doctest
+
+import pytest
+import torch
+
+from skillchain_torch.discovery import SkillChaining, native_discovery
+from skillchain_torch.discovery.events import target_indicator
+from skillchain_torch.discovery.executions import ExecutionTrace
+from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion
+from skillchain_torch.options import OptionBank, OptionStatus
+
+needs_native = pytest.mark.skipif(
+    not native_discovery.NATIVE,
+    reason="the compiled bookkeeping was not built (no C compiler at install time)")
+
+
+def test_doctest():
+    assert doctest.testmod(native_discovery).failed == 0
+
+
+def random_bank(P, K, E, seed) -> OptionBank:
+    """A bank with random trees: empty, base-event and chained slots of every status."""
+    g = torch.Generator().manual_seed(seed)
+    bank = OptionBank.build(P, K, order=1, capacity=8)
+    bank.status.copy_(torch.randint(0, 4, (P, K), generator=g))
+    bank.target_event.copy_(torch.randint(-1, E + 1, (P, K), generator=g))  # E: past the list
+    chained = torch.rand(P, K, generator=g) < 0.4
+    bank.parent.copy_(torch.where(chained, torch.randint(0, K, (P, K), generator=g), -1))
+    bank.classifier.trained.copy_(torch.rand(P, K, generator=g) < 0.7)
+    return bank
+
+
+def flags(shape, seed, p=0.5):
+    return torch.rand(shape, generator=torch.Generator().manual_seed(seed)) < p
+
+
+@needs_native
+@pytest.mark.parametrize("E", [0, 1, 3])
+def test_target_indicator_and_overlap_equal_torch(E, monkeypatch):
+    bank = random_bank(50, 6, E, seed=E)
+    base, contains = flags((50, E), 1), flags((50, 6), 2)
+    exclusion = overlap_exclusion(bank)
+    got = (target_indicator(bank, base, contains),
+           exclude_overlap(contains, exclusion, bank.classifier.trained))
+    monkeypatch.setattr(native_discovery, "NATIVE", False)
+    expected = (target_indicator(bank, base, contains),
+                exclude_overlap(contains, exclusion, bank.classifier.trained))
+    for a, b in zip(got, expected):
+        assert torch.equal(a, b)
+    assert bool(expected[0].any()) and bool((contains & ~expected[1]).any())  # both exercised
+
+
+@needs_native
+def test_record_equals_torch(monkeypatch):
+    head = OptionBank.build(20, 2, order=1).q_head
+    traces = [ExecutionTrace(20, 7, head) for _ in range(2)]
+    g = torch.Generator().manual_seed(3)
+    for t in range(12):
+        rows, step = flags(20, t), torch.randint(0, 10, (20,), generator=g)  # past T too
+        obs = torch.rand(20, 4, dtype=torch.float64, generator=g)
+        for native, trace in zip((True, False), traces):
+            monkeypatch.setattr(native_discovery, "NATIVE", native)
+            trace.record(rows, step, obs)
+    assert torch.equal(traces[0].states, traces[1].states)
+    assert bool((traces[0].states != 0).any())
+
+
+@needs_native
+def test_after_transition_equals_torch(monkeypatch):
+    """Triggers, gestation samples and base events of a step, with the same creations."""
+    P, K = 40, 5
+    results = []
+    for native in (True, False):
+        monkeypatch.setattr(native_discovery, "NATIVE", native)
+        bank = random_bank(P, K, 1, seed=9)
+        bank.status[:, -1] = int(OptionStatus.EMPTY)  # room to create
+        sc = SkillChaining(bank, max_option_steps=5)
+        sc.base_now = flags((P, 1), 4, 0.2)
+        sc._base_next = flags((P, 1), 5, 0.3)
+        sc.gestation_q = torch.randn(P, K, dtype=torch.float64,
+                                     generator=torch.Generator().manual_seed(6))
+        created = sc.after_transition(
+            contains=flags((P, K), 7), option=torch.full((P,), -1), value=torch.linspace(
+                -1, 1, P, dtype=torch.float64), contains_next=flags((P, K), 8),
+            reached=flags((P, K), 10), duration=torch.ones(P, dtype=torch.int64),
+            decision_ended=flags(P, 11), terminated=flags(P, 12, 0.1), stepped=flags(P, 13, 0.8))
+        results.append((created, sc.gestation_q, sc.base_now, bank.status.clone(),
+                        bank.parent.clone(), bank.target_event.clone()))
+    for a, b in zip(*results):
+        assert torch.equal(a, b)
+    assert bool(results[0][0].any())  # options were created
+    assert not torch.equal(results[0][1], torch.randn(P, K, dtype=torch.float64,
+                                                      generator=torch.Generator().manual_seed(6)))
