@@ -51,6 +51,36 @@ static PyObject *target_indicator(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* event_list(P, K, E, parent, target_event, status, max_branching, base_on, slot_on): the
+ * target events on each agent's list: base event e while fewer than max_branching live
+ * options target it; slot j's set once LEARNED, while fewer than max_branching target it. */
+static PyObject *event_list(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K, E, max_branching;
+    unsigned long long par_p, te_p, st_p, bo_p, so_p;
+    if (!PyArg_ParseTuple(args, "nnnKKKnKK", &P, &K, &E, &par_p, &te_p, &st_p, &max_branching,
+                          &bo_p, &so_p))
+        return NULL;
+    const int64_t *parent = (const int64_t *)(uintptr_t)par_p;
+    const int64_t *target_event = (const int64_t *)(uintptr_t)te_p;
+    const int64_t *status = (const int64_t *)(uintptr_t)st_p;
+    uint8_t *base_on = (uint8_t *)(uintptr_t)bo_p, *slot_on = (uint8_t *)(uintptr_t)so_p;
+    for (Py_ssize_t p = 0; p < P; p++) {
+        const int64_t *par = parent + p * K, *te = target_event + p * K, *st = status + p * K;
+        for (Py_ssize_t e = 0; e < E; e++) {
+            Py_ssize_t n = 0;
+            for (Py_ssize_t k = 0; k < K; k++) n += st[k] != 0 && par[k] < 0 && te[k] == e;
+            base_on[p * E + e] = (uint8_t)(n < max_branching);
+        }
+        for (Py_ssize_t j = 0; j < K; j++) {
+            Py_ssize_t n = 0;
+            for (Py_ssize_t k = 0; k < K; k++) n += st[k] != 0 && par[k] == j;
+            slot_on[p * K + j] = (uint8_t)(st[j] == LEARNED && n < max_branching);
+        }
+    }
+    Py_RETURN_NONE;
+}
+
 /* exclude_overlap(P, K, contains, exclusion, trained, out): out[p, k] = contains[p, k] and no
  * j with exclusion[p, k, j] is a trained set holding the state. */
 static PyObject *exclude_overlap(PyObject *self, PyObject *args)
@@ -151,6 +181,7 @@ static PyObject *triggers(PyObject *self, PyObject *args)
 static PyMethodDef methods[] = {
     {"target_indicator", target_indicator, METH_VARARGS, "Each option's target at a state."},
     {"exclude_overlap", exclude_overlap, METH_VARARGS, "Memberships under the overlap rule."},
+    {"event_list", event_list, METH_VARARGS, "The target events on each agent's list."},
     {"record", record, METH_VARARGS, "Executing agents' states into the trace."},
     {"triggers", triggers, METH_VARARGS, "Entered events and gestation samples of a step."},
     {NULL, NULL, 0, NULL},

@@ -63,6 +63,9 @@ def event_list(bank: OptionBank, num_base: int,
     A base event is listed until ``max_branching`` options target it; slot j's initiation set
     is listed once the option is LEARNED, until ``max_branching`` options target it.
     """
+    if native_discovery.applies(bank.status):
+        return native_discovery.event_list(bank.parent, bank.target_event, bank.status,
+                                           num_base, max_branching)  # fmt: skip
     base, slot = targeting(bank, num_base)
     base_on = base.sum(1) < max_branching
     slot_on = (bank.status == OptionStatus.LEARNED) & (slot.sum(1) < max_branching)

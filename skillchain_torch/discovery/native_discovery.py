@@ -3,7 +3,8 @@
 The discovery pieces call these for CPU tensors when the extension is built (:data:`NATIVE`,
 a switch tests turn off to compare): :func:`~.events.target_indicator`,
 :func:`~.overlap.exclude_overlap`, :meth:`~.executions.ExecutionTrace.record` and the
-triggers and gestation samples of :meth:`~.skill_chaining.SkillChaining.after_transition`.
+triggers and gestation samples of :meth:`~.skill_chaining.SkillChaining.after_transition`,
+and :func:`~.events.event_list`.
 They are booleans, copies and maxima, so they give the torch path's results exactly, and each
 agent's row depends on that agent alone.
 
@@ -26,7 +27,8 @@ try:
 except ImportError:  # built without a C compiler: the torch path
     _c = None
 
-__all__ = ["NATIVE", "applies", "target_indicator", "exclude_overlap", "record", "triggers"]
+__all__ = ["NATIVE", "applies", "target_indicator", "event_list", "exclude_overlap", "record",
+           "triggers"]
 
 NATIVE = _c is not None
 
@@ -54,6 +56,18 @@ def target_indicator(parent: Tensor, target_event: Tensor, status: Tensor, base_
                         status.data_ptr(), base_fired.data_ptr(), contains.data_ptr(),
                         out.data_ptr())  # fmt: skip
     return out
+
+
+def event_list(parent: Tensor, target_event: Tensor, status: Tensor, num_base: int,
+               max_branching: int) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """:func:`~.events.event_list` from the bank's ``[P, K]`` metadata."""
+    P, K = status.shape
+    parent, target_event, status = (x.contiguous() for x in (parent, target_event, status))
+    base_on = torch.empty(P, num_base, dtype=torch.bool)
+    slot_on = torch.empty(P, K, dtype=torch.bool)
+    _c.event_list(P, K, num_base, parent.data_ptr(), target_event.data_ptr(), status.data_ptr(),
+                  int(max_branching), base_on.data_ptr(), slot_on.data_ptr())  # fmt: skip
+    return base_on, slot_on
 
 
 def exclude_overlap(contains: Tensor, exclusion: Tensor, trained: Tensor) -> Tensor:

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from skillchain_torch.discovery import SkillChaining, native_discovery
-from skillchain_torch.discovery.events import target_indicator
+from skillchain_torch.discovery.events import event_list, target_indicator
 from skillchain_torch.discovery.executions import ExecutionTrace
 from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion
 from skillchain_torch.options import OptionBank, OptionStatus
@@ -38,18 +38,21 @@ def flags(shape, seed, p=0.5):
 
 @needs_native
 @pytest.mark.parametrize("E", [0, 1, 3])
-def test_target_indicator_and_overlap_equal_torch(E, monkeypatch):
+def test_target_indicator_event_list_and_overlap_equal_torch(E, monkeypatch):
     bank = random_bank(50, 6, E, seed=E)
     base, contains = flags((50, E), 1), flags((50, 6), 2)
     exclusion = overlap_exclusion(bank)
     got = (target_indicator(bank, base, contains),
-           exclude_overlap(contains, exclusion, bank.classifier.trained))
+           exclude_overlap(contains, exclusion, bank.classifier.trained),
+           *event_list(bank, E, max_branching=2))
     monkeypatch.setattr(native_discovery, "NATIVE", False)
     expected = (target_indicator(bank, base, contains),
-                exclude_overlap(contains, exclusion, bank.classifier.trained))
+                exclude_overlap(contains, exclusion, bank.classifier.trained),
+                *event_list(bank, E, max_branching=2))
     for a, b in zip(got, expected):
         assert torch.equal(a, b)
-    assert bool(expected[0].any()) and bool((contains & ~expected[1]).any())  # both exercised
+    assert bool(expected[0].any()) and bool((contains & ~expected[1]).any())  # exercised
+    assert bool(expected[3].any()) and not bool(expected[3].all())  # listed and full slots
 
 
 @needs_native
