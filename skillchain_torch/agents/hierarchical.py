@@ -23,8 +23,15 @@ stream never depends on the other agents. Every tensor operation is row-independ
 library pieces are), so agent ``p`` of a population is bit-identical to the same agent alone.
 
 The state is held for all P agents; rows that finished training (``compact``) simply stop being
-updated. This is the simple, correct version: every step evaluates the option heads of all P
-agents (cost ``P * K * 5 * 256`` multiply-adds for the Fourier heads).
+updated.
+
+Two paths compute a step (``native``). The torch path composes the library pieces named above
+and gives their bits. The compiled path (the default on the CPU when built) runs the same
+transition through :func:`~skillchain_torch.agents.native_hierarchical.step`, one C pass per
+agent, after the memberships, target events, features and uniforms of ``s'`` (which stay in
+torch, where subclasses and users change them): the same decisions from the same uniforms, with
+sums in an order of its own, so weights agree with the torch path to rounding. Each path keeps
+the population contract on its own; a checkpoint resumes only on the path that saved it.
 
 Episode protocol (as :class:`skillchain_torch.trainers.flat.FlatSarsaAgent`; rows = active
 agents in ascending id order): ``begin(obs)``, ``observe(obs, reward)``,
