@@ -2,7 +2,6 @@
 
 import doctest
 import importlib
-import time
 
 import pytest
 import torch
@@ -89,21 +88,20 @@ def test_sweeps_are_full_batch_gradient_steps():
 
 
 @pytest.mark.parametrize("replacement", ["reservoir", "ring"])
-def test_store_is_capped_and_fit_time_bounded(replacement):
+def test_store_is_capped_and_fit_work_bounded(replacement):
     cap = 50
     clf = InitiationClassifier(population=2, slots=2, capacity=cap, replacement=replacement)
     gen = torch.Generator().manual_seed(0)
-    times = []
     for i in range(12):
         x = torch.rand(40, 4, dtype=F64, generator=gen)
         x[:, 3] = i  # tag the batch
         clf.add_examples(torch.tensor([0] * 30 + [1] * 10), 1, x, x[:, 0] < 0.5)
-        start = time.perf_counter()
         clf.fit()
-        times.append(time.perf_counter() - start)
         assert bool((clf.count <= cap).all())
+        # a fit's sweeps run over fit_length(count) places: bounded by the store, whatever
+        # was seen (the timing itself is benchmarks' business)
+        assert int(clf.fit_length(clf.count).max()) <= cap
     assert clf.seen[:, 1].tolist() == [360, 120] and clf.count[:, 1].tolist() == [cap, cap]
-    assert max(times[6:]) < 5 * max(times[1:6]) + 0.05  # no growth with the data seen
     tags = clf.examples[0, 1, :, 3]
     if replacement == "ring":  # the newest 50 of agent 0's 360 examples
         assert sorted(tags.tolist()) == [10.0] * 20 + [11.0] * 30
