@@ -197,6 +197,15 @@ class HierarchicalAgent(nn.Module):
         self.active = torch.ones(P, dtype=torch.bool, device=device)
         self._index = torch.arange(P, device=device)
 
+    def _apply(self, fn, *args, **kwargs):
+        # Moved off the CPU or out of float64 (.to, .cuda, .float): C must not read the
+        # weights any more (a device pointer would crash it); the torch path applies.
+        out = super()._apply(fn, *args, **kwargs)
+        weights = (self.q_head.weight, self.bank.q_head.weight) if self.native else ()
+        if any(w.device.type != "cpu" or w.dtype != torch.float64 for w in weights):
+            self.native = False
+        return out
+
     def _resolve_native(self, native: bool | None, completion_reward) -> bool:
         """The ``native`` argument made a choice; turns the classifier's compiled path on or
         off with it. ``ValueError`` naming what is missing when ``True`` cannot be had."""

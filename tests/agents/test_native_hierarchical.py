@@ -196,3 +196,12 @@ def test_native_true_names_what_is_missing():
         HierarchicalAgent(bank, order=1, native=True)
     agent = HierarchicalAgent(bank, order=1)  # the default falls back to torch
     assert agent.native is False and agent.bank.classifier.native is False
+
+
+@needs_native
+def test_leaving_float64_turns_the_compiled_path_off():
+    """C reads raw float64 CPU memory: an agent moved out of it falls back to torch."""
+    agent = SkillChainingAgent.build(1, slots=2, order=1)
+    assert agent.native is True
+    agent.to(torch.float32)
+    assert agent.native is False and agent.bank.classifier.native is False
