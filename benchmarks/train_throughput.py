@@ -35,6 +35,7 @@ import numpy as np
 import torch
 
 from skillchain_torch import rng
+from skillchain_torch.discovery import native_discovery
 from skillchain_torch.envs.pinball import load_map
 from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
 from skillchain_torch.features import fourier
@@ -50,7 +51,7 @@ def time_trainer(population: int, agent_steps: int, threads: int, repeats: int =
     best = 0.0
     for r in range(repeats):
         cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=r)
-        with compiled_features(native is not False):
+        with compiled_same_bits(native is not False):
             trainer = PopulationTrainer(cfg, num_threads=threads, native=native)
             trainer.train(max_agent_steps=20 * population)  # warm-up: caches, allocations
             start, done = time.perf_counter(), trainer.agent_steps
@@ -60,16 +61,17 @@ def time_trainer(population: int, agent_steps: int, threads: int, repeats: int =
 
 
 @contextlib.contextmanager
-def compiled_features(on: bool):
-    """FourierBasis's compiled arguments and CounterRNG's compiled draws on or off (global
-    switches; the same bits either way)."""
-    saved = fourier.NATIVE, rng.NATIVE
+def compiled_same_bits(on: bool):
+    """The compiled pieces that give the torch path's bits on or off (global switches):
+    FourierBasis's arguments, CounterRNG's draws, skill chaining's bookkeeping."""
+    saved = fourier.NATIVE, rng.NATIVE, native_discovery.NATIVE
     fourier.NATIVE = on and fourier._fourier_native is not None
     rng.NATIVE = on and rng._rng_native is not None
+    native_discovery.NATIVE = on and native_discovery._c is not None
     try:
         yield
     finally:
-        fourier.NATIVE, rng.NATIVE = saved
+        fourier.NATIVE, rng.NATIVE, native_discovery.NATIVE = saved
 
 
 class NumpySarsa:
@@ -141,7 +143,7 @@ def skill_chaining_trainer(population: int, threads: int, seed: int = 0,
     seeds = torch.arange(population, dtype=torch.int64) + seed
     given = OptionBank.from_agent(OPTIONS, 0, population, seeds=seeds)
     trainer.agent.bank.load_state_dict(given.state_dict())
-    with compiled_features(native is not False):
+    with compiled_same_bits(native is not False):
         trainer.train(max_agent_steps=20 * population)
     return trainer
 
@@ -160,7 +162,7 @@ def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
     for name, native in (("flat_torch", False), ("flat_native", None)):
         cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=0)
         trainers[name] = PopulationTrainer(cfg, num_threads=threads, native=native)
-        with compiled_features(native is not False):
+        with compiled_same_bits(native is not False):
             trainers[name].train(max_agent_steps=20 * population)
     for name, native in (("sc_torch", False), ("sc_native", None)):
         trainers[name] = skill_chaining_trainer(population, threads, native=native)
@@ -168,7 +170,7 @@ def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
     for _ in range(rounds):
         for name, trainer in trainers.items():
             steps = options_steps if name.startswith("sc_") else flat_steps
-            with compiled_features(not name.endswith("_torch")):
+            with compiled_same_bits(not name.endswith("_torch")):
                 start, done = time.perf_counter(), trainer.agent_steps
                 trainer.train(max_agent_steps=done + steps)
             rates[name].append((trainer.agent_steps - done) / (time.perf_counter() - start))
@@ -196,8 +198,8 @@ def main() -> None:
     peer = max(NumpySarsa(seed=r).run(args.steps // 2) for r in range(2))
     print(f"flat Sarsa on {MAP}, torch {torch.__version__}, {args.threads} thread(s); "
           f"{args.steps:,} agent steps per row (best of 3)")
-    print("compiled: the default (compiled Pinball step, Fourier arguments and Sarsa kernels, "
-          f"built: {native_sarsa.AVAILABLE}); torch only: none of them")
+    print("compiled: the default (every compiled piece: Pinball step, Fourier arguments, random "
+          f"draws, the agents' kernels; built: {native_sarsa.AVAILABLE}); torch only: none")
     print(f"{'P':>5} | {'compiled':>10} | {'torch only':>10} | {'numpy peer':>10} | "
           f"{'ratio':>6} | {'vs torch':>8}")
     print(f"{'-' * 5}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 6}-|-{'-' * 8}")

@@ -146,60 +146,6 @@ static PyObject *act(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
-/* smdp(P, D, F, w, phi, decision, ret, duration, q_next, terminal, active, step, step_stride,
- * gamma, use_gamma, delta): smdp_row for the active rows; delta 0 on the others. */
-static PyObject *smdp(PyObject *self, PyObject *args)
-{
-    Py_ssize_t P, D, F, step_stride;
-    unsigned long long w_p, phi_p, dec_p, ret_p, dur_p, qn_p, term_p, act_p, step_p, delta_p;
-    double gamma;
-    int use_gamma;
-    if (!PyArg_ParseTuple(args, "nnnKKKKKKKKKndiK", &P, &D, &F, &w_p, &phi_p, &dec_p, &ret_p,
-                          &dur_p, &qn_p, &term_p, &act_p, &step_p, &step_stride, &gamma,
-                          &use_gamma, &delta_p))
-        return NULL;
-    double *w = F64(w_p), *delta = F64(delta_p);
-    const double *phi = F64(phi_p), *ret = F64(ret_p), *q_next = F64(qn_p);
-    const int64_t *decision = I64(dec_p), *duration = I64(dur_p);
-    const uint8_t *terminal = U8(term_p), *active = U8(act_p);
-    for (Py_ssize_t p = 0; p < P; p++)
-        delta[p] = active[p] ? smdp_row(w + (p * D + decision[p]) * F, phi + p * F, F, ret[p],
-                                        duration[p], q_next[p], terminal[p], F64(step_p),
-                                        step_stride, gamma, use_gamma)
-                             : 0.0;
-    Py_RETURN_NONE;
-}
-
-/* intra_option(P, K, A, Fo, w, code, next_code, action, reward, terminated, mask, reached,
- * alpha, gamma, completion, delta): intra_row for every (p, k) in mask; delta 0 elsewhere. */
-static PyObject *intra_option(PyObject *self, PyObject *args)
-{
-    Py_ssize_t P, K, A, Fo;
-    unsigned long long w_p, code_p, next_p, act_p, r_p, term_p, mask_p, reach_p, delta_p;
-    double alpha, gamma, completion;
-    if (!PyArg_ParseTuple(args, "nnnnKKKKKKKKdddK", &P, &K, &A, &Fo, &w_p, &code_p, &next_p,
-                          &act_p, &r_p, &term_p, &mask_p, &reach_p, &alpha, &gamma,
-                          &completion, &delta_p))
-        return NULL;
-    if (A > MAX_CHOICES) {
-        PyErr_SetString(PyExc_ValueError, "intra_option: at most 64 actions");
-        return NULL;
-    }
-    double *w = F64(w_p), *delta = F64(delta_p);
-    const double *code = F64(code_p), *next_code = F64(next_p), *reward = F64(r_p);
-    const int64_t *action = I64(act_p);
-    const uint8_t *terminated = U8(term_p), *mask = U8(mask_p), *reached = U8(reach_p);
-    for (Py_ssize_t p = 0; p < P; p++)
-        for (Py_ssize_t k = 0; k < K; k++) {
-            Py_ssize_t s = p * K + k;
-            delta[s] = mask[s] ? intra_row(w + s * A * Fo, code + p * Fo, next_code + p * Fo,
-                                           action[p], reward[p], reached[s], terminated[p], A,
-                                           Fo, alpha, gamma, completion)
-                               : 0.0;
-        }
-    Py_RETURN_NONE;
-}
-
 /* ------------------------------------------------------------------ the whole transition */
 
 /* step(P, K, A, F, Fo, w, w_opt, obs, code, contains, phi, decision, option, action, ret,
@@ -347,8 +293,6 @@ static PyObject *step(PyObject *self, PyObject *args)
 static PyMethodDef methods[] = {
     {"choose", choose, METH_VARARGS, "Top-level values and epsilon-greedy decisions."},
     {"act", act, METH_VARARGS, "Primitive actions: the decision's, or the option's choice."},
-    {"smdp", smdp, METH_VARARGS, "SMDP Sarsa updates of the decisions that ended."},
-    {"intra_option", intra_option, METH_VARARGS, "Intra-option Q-learning updates."},
     {"step", step, METH_VARARGS, "HierarchicalAgent.transition for every row."},
     {NULL, NULL, 0, NULL},
 };

@@ -64,14 +64,7 @@ from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.native import check_same_kernels
 from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate, discount
-from skillchain_torch.options import (
-    FourierOptionQHead,
-    GoalEvent,
-    OptionBank,
-    OptionStatus,
-    TerminationPredicate,
-    native_initiation,
-)
+from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
 
@@ -83,6 +76,12 @@ OBS_DIM = 4
 MAX_OPTION_STEPS = 250
 UNIFORMS_PER_STEP = 4  # top-level (explore, pick), option (explore, pick)
 AGENT_STREAM = 0
+
+
+def as_bool(x: Tensor) -> Tensor:
+    """``x`` as a BoolTensor, without a call when it is one already (``Tensor.to`` costs a
+    few microseconds even then, and per-step flags pass through here)."""
+    return x if x.dtype == torch.bool else x.to(torch.bool)
 
 
 def shared_fourier_columns(basis: FourierBasis, q_head) -> Tensor | None:
@@ -157,7 +156,8 @@ class HierarchicalAgent(nn.Module):
         super().__init__()
         device = torch.device(bank.status.device if device is None else device)
         self.bank = bank.to(device)
-        self.native = self._resolve_native(native, completion_reward)
+        self.native = _native.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES)
+        self.bank.classifier.set_native(self.native)  # memberships and refits go with it
         self.population, self.slots = bank.population, bank.slots
         self.num_decisions = NUM_PRIMITIVES + self.slots
         self.order = int(order)
@@ -206,35 +206,13 @@ class HierarchicalAgent(nn.Module):
             self.native = False
         return out
 
-    def _resolve_native(self, native: bool | None, completion_reward) -> bool:
-        """The ``native`` argument made a choice; turns the classifier's compiled path on or
-        off with it. ``ValueError`` naming what is missing when ``True`` cannot be had."""
-        bank, f64 = self.bank, torch.float64
-        fourier = isinstance(bank.q_head, FourierOptionQHead)
-        needs = {
-            "the compiled kernels": _native.AVAILABLE and native_initiation.AVAILABLE,
-            "the CPU": bank.status.device.type == "cpu",
-            "Fourier option heads": fourier,
-            f"{NUM_PRIMITIVES} option actions": bank.q_head.num_actions == NUM_PRIMITIVES,
-            "float64 option heads and classifier": (not fourier or bank.q_head.weight.dtype == f64)
-            and bank.classifier.weight.dtype == f64,
-            "a float completion_reward": not isinstance(completion_reward, Tensor),
-        }
-        missing = [name for name, ok in needs.items() if not ok]
-        if native is None:
-            native = not missing
-        if native and missing:
-            raise ValueError(f"native=True needs {', '.join(missing)}")
-        bank.classifier.set_native(bool(native))
-        return bool(native)
-
     # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
     # parameters, buffers and submodules) costs more than the tensor maths for these.
     _PLAIN = frozenset({"obs", "contains", "decision_phi", "decision", "option", "action",
                         "decision_return", "duration", "active", "option_code", "last_q",
                         "last_phi", "last_value", "_index"})  # fmt: skip
     # The compiled transition also returns Q(s', d) of the decision in force (last_value).
-    _WANTS_VALUE = False
+    WANTS_VALUE = False
 
     def __setattr__(self, name, value):
         if name in self._PLAIN:
@@ -356,17 +334,21 @@ class HierarchicalAgent(nn.Module):
         ``option_delta [P, K]`` (intra-option TD errors, 0 outside the initiation sets) and
         ``reached [P, K]`` (each option's target event at ``s'``).
         """
-        if self.native:
-            return self._transition_native(next_obs, reward, terminated, truncated, stepped)
-        bank = self.bank
-        terminated = terminated.to(torch.bool) & stepped
-        truncated = truncated.to(torch.bool) & stepped
-        ended = terminated | truncated
+        # What may be changed by a subclass or the user (memberships, target events) is
+        # evaluated here for both paths.
+        terminated = as_bool(terminated) & stepped
+        truncated = as_bool(truncated) & stepped
+        reward = reward if reward.dtype == torch.float64 else reward.to(torch.float64)
         next_obs = torch.where(stepped[:, None], next_obs, self.obs)
-        reward = reward.to(torch.float64)
-        reward = torch.where(stepped, reward, torch.zeros_like(reward))
         contains_next = self.membership(next_obs)
         reached = self.targets(next_obs, terminated, contains_next)
+        u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
+        if self.native:  # the rest in one compiled pass
+            return _native.transition(self, next_obs, reward, terminated, truncated, stepped,
+                                      contains_next, reached, u)  # fmt: skip
+        bank = self.bank
+        ended = terminated | truncated
+        reward = torch.where(stepped, reward, torch.zeros_like(reward))
         # Intra-option Q-learning: every live option whose initiation set holds s.
         phi_next, next_code = self._encode(next_obs)
         option_delta = self.option_update(
@@ -387,7 +369,6 @@ class HierarchicalAgent(nn.Module):
                                     | (self.duration >= self.max_option_steps))
         decision_ended = stepped & (~executing | option_stops | ended)
         # Next top-level decision at s' (also the bootstrap decision d').
-        u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
         phi_next, d_next = self._choose(next_obs, phi_next, contains_next, u[:, :2],
                                         rows=decision_ended)  # fmt: skip
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
@@ -407,39 +388,6 @@ class HierarchicalAgent(nn.Module):
         self._new_decisions(decision_ended & ~ended, phi_next, d_next)
         self.option = torch.where(ended, torch.full_like(self.option, -1), self.option)
         self._act(continuing, u[:, 2:])
-        return info
-
-    def _transition_native(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
-                           truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:  # fmt: skip
-        """:meth:`transition` with its arithmetic in one compiled pass
-        (:func:`~.native_hierarchical.step`): what stays here is what a subclass or the user
-        may change (memberships, target events) and the features and uniforms of ``s'``."""
-        # (.to of a tensor already of the dtype costs microseconds: this runs every step)
-        terminated = (terminated if terminated.dtype == torch.bool
-                      else terminated.to(torch.bool)) & stepped  # fmt: skip
-        truncated = (truncated if truncated.dtype == torch.bool
-                     else truncated.to(torch.bool)) & stepped  # fmt: skip
-        reward = reward if reward.dtype == torch.float64 else reward.to(torch.float64)
-        next_obs = torch.where(stepped[:, None], next_obs, self.obs)
-        contains_next = self.membership(next_obs)
-        reached = self.targets(next_obs, terminated, contains_next)
-        phi_next = self.features(next_obs)
-        # The option heads' code is picked from phi_next inside (shared_fourier_columns).
-        columns = self._code_columns
-        next_code = self.bank.q_head.encode(next_obs) if columns is None else None
-        u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
-        out = _native.step(self, next_obs, reward.contiguous(), terminated,
-                           truncated, stepped, contains_next, reached.contiguous(), phi_next,
-                           next_code, columns, u, int(OptionStatus.LEARNING),
-                           value=self._WANTS_VALUE)  # fmt: skip
-        info = {"decision_ended": out["decision_ended"], "duration": out["info_duration"],
-                "decision_return": out["info_return"], "option_delta": out["option_delta"],
-                "smdp_delta": out["smdp_delta"], "decision": self.decision,
-                "option": self.option, "reached": reached}  # fmt: skip
-        for name in _native.STATE:
-            setattr(self, name, out[name])
-        self.last_phi, self.last_q, self.last_value = phi_next, out["q"], out["value"]
-        self._options_starting(out["started"])
         return info
 
     # ------------------------------------------------------------------ protocol

@@ -2,19 +2,20 @@
 
 :class:`~skillchain_torch.agents.HierarchicalAgent` with ``native=True`` (its default on CPU
 float64 with Fourier option heads, when built: :data:`AVAILABLE`) runs every transition
-through :func:`step` and starts episodes with :func:`choose` and :func:`act`. Each function
+through :func:`transition` and starts episodes with :func:`choose` and :func:`act`. Each
 mirrors library pieces, with the same rules and the same uniforms:
 
 ====================  =====================================================================
 :func:`choose`        ``LinearQHead.forward_mask`` + :func:`~skillchain_torch.policies.
                       epsilon_greedy` (the top-level decision)
 :func:`act`           the executing options' values (``slot_values_rows``) + epsilon-greedy
-:func:`smdp`          :class:`~skillchain_torch.objectives.SarsaUpdate` with ``next_value``
-:func:`intra_option`  :class:`~skillchain_torch.objectives.IntraOptionQLearning` on a
-                      :class:`~skillchain_torch.options.FourierOptionQHead` (float ``C``)
-:func:`step`          the whole of ``HierarchicalAgent.transition`` after the memberships,
-                      targets, features and uniforms of ``s'``: the four pieces above (the
-                      same C row functions) in its order, one pass per agent
+:func:`transition`    the rest of ``HierarchicalAgent.transition`` after the memberships,
+                      targets and uniforms of ``s'``, one C pass per agent: intra-option
+                      Q-learning (:class:`~skillchain_torch.objectives.IntraOptionQLearning`
+                      on a :class:`~skillchain_torch.options.FourierOptionQHead`, float
+                      ``C``), the top-level choice (the same C function as :func:`choose`),
+                      SMDP Sarsa (:class:`~skillchain_torch.objectives.SarsaUpdate`), the
+                      next action (as :func:`act`)
 ====================  =====================================================================
 
 The sums run in a fixed order of their own, so values and weights agree with the torch path
@@ -44,12 +45,14 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from skillchain_torch.options import FourierOptionQHead, OptionStatus, native_initiation
+
 try:
     from skillchain_torch.agents import _hierarchical_native as _c
 except ImportError:  # built without a C compiler: the agent keeps its torch path
     _c = None
 
-__all__ = ["AVAILABLE", "choose", "act", "smdp", "intra_option", "step"]
+__all__ = ["AVAILABLE", "choose", "act", "resolve", "transition"]
 
 AVAILABLE = _c is not None
 
@@ -79,74 +82,68 @@ def act(w: Tensor, code: Tensor, rows: Tensor, decision: Tensor, option: Tensor,
     return action
 
 
-def smdp(w: Tensor, phi: Tensor, decision: Tensor, ret: Tensor, duration: Tensor,
-         q_next: Tensor, terminal: Tensor, active: Tensor, step_size: Tensor,
-         gamma: float) -> Tensor:  # fmt: skip
-    """SMDP Sarsa on the ``active`` rows, in place; the TD errors ``[P]`` (0 elsewhere).
-    ``gamma == 1`` adds ``Q(s', d')`` without a power, as the torch path."""
-    P, D, F = w.shape
-    delta = torch.empty(P, dtype=torch.float64)
-    _c.smdp(P, D, F, w.data_ptr(), phi.data_ptr(), decision.data_ptr(), ret.data_ptr(),
-            duration.data_ptr(), q_next.data_ptr(), terminal.data_ptr(), active.data_ptr(),
-            step_size.data_ptr(), 1 if step_size.ndim else 0, float(gamma), gamma != 1.0,
-            delta.data_ptr())  # fmt: skip
-    return delta
+def resolve(bank, native: bool | None, completion_reward, num_primitives: int) -> bool:
+    """The agent's ``native`` argument made a choice for ``bank``'s options: ``None`` is
+    ``True`` where the compiled path applies; ``True`` where it does not raises
+    ``ValueError`` naming what is missing."""
+    f64 = torch.float64
+    fourier = isinstance(bank.q_head, FourierOptionQHead)
+    needs = {
+        "the compiled kernels": AVAILABLE and native_initiation.AVAILABLE,
+        "the CPU": bank.status.device.type == "cpu",
+        "Fourier option heads": fourier,
+        f"{num_primitives} option actions": bank.q_head.num_actions == num_primitives,
+        "float64 option heads and classifier": (not fourier or bank.q_head.weight.dtype == f64)
+        and bank.classifier.weight.dtype == f64,
+        "a float completion_reward": not isinstance(completion_reward, Tensor),
+    }
+    missing = [name for name, ok in needs.items() if not ok]
+    if native and missing:
+        raise ValueError(f"native=True needs {', '.join(missing)}")
+    return not missing if native is None else bool(native)
 
 
-def intra_option(w: Tensor, code: Tensor, next_code: Tensor, action: Tensor, reward: Tensor,
-                 terminated: Tensor, mask: Tensor, reached: Tensor, alpha: float, gamma: float,
-                 completion: float) -> Tensor:  # fmt: skip
-    """Intra-option Q-learning of the ``mask [P, K]`` slots, in place; the TD errors
-    ``[P, K]`` (0 elsewhere)."""
-    P, K, A, F = w.shape
-    delta = torch.empty(P, K, dtype=torch.float64)
-    _c.intra_option(P, K, A, F, w.data_ptr(), code.data_ptr(), next_code.data_ptr(),
-                    action.data_ptr(), reward.data_ptr(), terminated.data_ptr(),
-                    mask.data_ptr(), reached.data_ptr(), float(alpha), float(gamma),
-                    float(completion), delta.data_ptr())  # fmt: skip
-    return delta
-
-
-# The agent's per-step state, in the order step() reads and writes it.
+# The agent's per-step state, in the order the C step reads and writes it.
 STATE = ("obs", "option_code", "contains", "decision_phi", "decision", "option", "action",
-          "decision_return", "duration")
+         "decision_return", "duration")
+_OUT = ("q", "d_next", "decision_ended", "option_delta", "smdp_delta", "info_duration",
+        "info_return", "started")
 
 
-def step(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
-         stepped: Tensor, contains_next: Tensor, reached: Tensor, phi_next: Tensor,
-         next_code: Tensor | None, columns: Tensor | None, uniforms: Tensor,
-         executable_from: int, value: bool = False) -> dict[str, Tensor]:  # fmt: skip
-    """``agent``'s transition for every row (its weights updated in place).
+def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
+               stepped: Tensor, contains_next: Tensor, reached: Tensor,
+               uniforms: Tensor) -> dict[str, Tensor]:  # fmt: skip
+    """The rest of ``agent.transition`` after the memberships, targets and uniforms
+    (``[P, 4]``) of ``s'``: its features, then every row in one C pass (weights updated in
+    place, the state at ``s'`` in fresh tensors). Returns the transition's monitoring dict.
 
-    The option heads' code of ``s'`` is ``next_code``, or (``None``) the ``columns`` of
-    ``phi_next``. Returns the state at ``s'`` under the agent's attribute names (fresh
-    tensors) plus ``q [P, D]`` (the values the decision at ``s'`` was taken with), ``d_next``,
-    ``decision_ended``, ``option_delta [P, K]``, ``smdp_delta``, ``info_duration``,
-    ``info_return`` (the decision's k and R before a new decision resets them), ``started``
-    (rows that start an option) and with ``value`` Q(s', d) of the decision in force after the
-    step (stepped rows). ``next_obs`` must already hold ``s`` on rows not stepped.
+    ``next_obs`` holds ``s`` on rows not stepped; ``terminated``/``truncated`` are masked to
+    ``stepped``; ``reward`` is float64.
     """
     bank, head = agent.bank, agent.q_head
     P, D, F = head.weight.shape
     _, K, A, Fo = bank.q_head.weight.shape
-    f64, i64 = dict(dtype=torch.float64), dict(dtype=torch.int64)
+    phi_next = agent.features(next_obs)
+    # The option heads' code is picked from phi_next inside (shared_fourier_columns).
+    columns = agent._code_columns
+    next_code = bank.q_head.encode(next_obs) if columns is None else None
+    reward, reached = reward.contiguous(), reached.contiguous()
+    f64, i64, b = dict(dtype=torch.float64), dict(dtype=torch.int64), dict(dtype=torch.bool)
     out = {
         "obs": torch.empty(P, 4, **f64), "option_code": torch.empty(P, Fo, **f64),
-        "contains": torch.empty(P, K, dtype=torch.bool), "decision_phi": torch.empty(P, F, **f64),
+        "contains": torch.empty(P, K, **b), "decision_phi": torch.empty(P, F, **f64),
         "decision": torch.empty(P, **i64), "option": torch.empty(P, **i64),
         "action": torch.empty(P, **i64), "decision_return": torch.empty(P, **f64),
         "duration": torch.empty(P, **i64), "q": torch.empty(P, D, **f64),
-        "d_next": torch.empty(P, **i64), "decision_ended": torch.empty(P, dtype=torch.bool),
+        "d_next": torch.empty(P, **i64), "decision_ended": torch.empty(P, **b),
         "option_delta": torch.empty(P, K, **f64), "smdp_delta": torch.empty(P, **f64),
         "info_duration": torch.empty(P, **i64), "info_return": torch.empty(P, **f64),
-        "started": torch.empty(P, dtype=torch.bool),
-        "value": torch.empty(P, **f64) if value else None,
+        "started": torch.empty(P, **b),
     }  # fmt: skip
-    step_size = agent.update.step_size
-    gamma = agent.gamma
+    value = torch.empty(P, **f64) if agent.WANTS_VALUE else None
+    step_size, gamma = agent.update.step_size, agent.gamma
     _c.step(P, K, A, F, Fo, head.weight.data_ptr(), bank.q_head.weight.data_ptr(),
-            *(getattr(agent, name).data_ptr() for name in STATE[:4]),
-            *(getattr(agent, name).data_ptr() for name in STATE[4:]),
+            *(getattr(agent, name).data_ptr() for name in STATE),
             next_obs.data_ptr(), reward.data_ptr(), terminated.data_ptr(), truncated.data_ptr(),
             stepped.data_ptr(), contains_next.data_ptr(), reached.data_ptr(),
             phi_next.data_ptr(), 0 if next_code is None else next_code.data_ptr(),
@@ -154,10 +151,15 @@ def step(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated:
             uniforms.data_ptr(), agent.epsilon, agent.option_epsilon, gamma, gamma != 1.0,
             agent.max_option_steps, bank.q_head.alpha,
             float(agent.option_update.completion_reward), step_size.data_ptr(),
-            1 if step_size.ndim else 0, int(executable_from),
-            *(out[name].data_ptr() for name in STATE),
-            *(out[name].data_ptr() for name in ("q", "d_next", "decision_ended", "option_delta",
-                                                "smdp_delta", "info_duration", "info_return",
-                                                "started")),
-            0 if out["value"] is None else out["value"].data_ptr())  # fmt: skip
-    return out
+            1 if step_size.ndim else 0, int(OptionStatus.LEARNING),
+            *(out[name].data_ptr() for name in STATE + _OUT),
+            0 if value is None else value.data_ptr())  # fmt: skip
+    info = {"decision_ended": out["decision_ended"], "duration": out["info_duration"],
+            "decision_return": out["info_return"], "option_delta": out["option_delta"],
+            "smdp_delta": out["smdp_delta"], "decision": agent.decision,
+            "option": agent.option, "reached": reached}  # fmt: skip
+    for name in STATE:
+        setattr(agent, name, out[name])
+    agent.last_phi, agent.last_q, agent.last_value = phi_next, out["q"], value
+    agent._options_starting(out["started"])
+    return info

@@ -43,7 +43,7 @@ from skillchain_torch.discovery import (
 )
 from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 
-from .hierarchical import MAX_OPTION_STEPS, HierarchicalAgent
+from .hierarchical import MAX_OPTION_STEPS, HierarchicalAgent, as_bool
 
 __all__ = ["SkillChainingAgent"]
 
@@ -65,7 +65,7 @@ class SkillChainingAgent(HierarchicalAgent):
     """
 
     _PLAIN = HierarchicalAgent._PLAIN | {"q_decision", "_starts"}
-    _WANTS_VALUE = True  # gestation samples Q(s, d) of the decision in force
+    WANTS_VALUE = True  # gestation samples Q(s, d) of the decision in force
 
     def __init__(self, bank: OptionBank, events: Sequence[TerminationPredicate] = (GoalEvent(),),
                  gestation: int = GESTATION_EPISODES, max_branching: int = MAX_BRANCHING,
@@ -132,9 +132,7 @@ class SkillChainingAgent(HierarchicalAgent):
         created = self.discovery.after_transition(
             contains=contains, option=option, value=value,
             contains_next=self.contains, reached=info["reached"], duration=info["duration"],
-            decision_ended=info["decision_ended"],
-            terminated=(terminated if terminated.dtype == torch.bool
-                        else terminated.to(torch.bool)) & stepped,
+            decision_ended=info["decision_ended"], terminated=as_bool(terminated) & stepped,
             stepped=stepped,
         )  # fmt: skip
         if bool(created.any()):  # the new slot changes the memberships at s'

@@ -14,8 +14,7 @@ import torch
 
 from skillchain_torch.agents import HierarchicalAgent, SkillChainingAgent, native_hierarchical
 from skillchain_torch.modules import LinearQHead
-from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate
-from skillchain_torch.options import FourierOptionQHead, MLPOptionQHead, OptionBank
+from skillchain_torch.options import FourierOptionQHead, MLPOptionQHead, OptionBank, OptionStatus
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
@@ -98,58 +97,57 @@ def test_act_equals_option_values_and_epsilon_greedy(epsilon):
     assert torch.equal(got, expected)
 
 
-@needs_native
-@pytest.mark.parametrize("gamma", [1.0, 0.9])
-@pytest.mark.parametrize("scaled", [False, True])
-def test_smdp_agrees_with_sarsa_update(gamma, scaled):
-    P, D, F = 50, 8, 20
-    g = gen(3)
-    weight = torch.randn(P, D, F, dtype=F64, generator=g)
-    phi = torch.randn(P, F, dtype=F64, generator=g)
-    decision = torch.randint(0, D, (P,), generator=g)
-    ret = torch.randn(P, dtype=F64, generator=g) * 50
-    duration = torch.randint(1, 30, (P,), generator=g)
-    q_next = torch.randn(P, dtype=F64, generator=g)
-    terminal = torch.rand(P, generator=g) < 0.3
-    active = torch.rand(P, generator=g) < 0.6
-    scale = torch.rand(F, dtype=F64, generator=g) + 0.5 if scaled else None
-    update = SarsaUpdate(0.01, gamma, step_size_scale=scale)
-    head = LinearQHead(F, D, P)
-    head.weight.copy_(weight)
-    expected = update(head, phi, decision, ret, duration, phi, decision, terminal, active=active,
-                      next_value=q_next)
-    w = weight.clone()
-    got = native_hierarchical.smdp(w, phi, decision, ret, duration, q_next, terminal, active,
-                                   update.step_size, gamma)
-    close(got, expected)
-    close(w, head.weight)
-    assert torch.equal(w[~active], weight[~active])  # inactive rows untouched
+def half_plane_bank(P, seed):
+    """Two LEARNED options with trained half-plane sets (x > 0.5, x < 0.5) and random heads,
+    so the top level can choose them and they act, learn and end."""
+    g = gen(seed)
+    bank = OptionBank.build(P, 2, order=2, alpha=0.01, seed=seed)
+    bank.q_head.weight.copy_(torch.randn(bank.q_head.weight.shape, dtype=F64, generator=g))
+    clf = bank.classifier
+    with torch.no_grad():
+        for k, sign in enumerate((1.0, -1.0)):
+            clf.weight[:, k, 1] = sign  # feature 1 is x
+            clf.bias[:, k] = -0.5 * sign
+    clf.trained[:] = True
+    bank.status[:] = int(OptionStatus.LEARNED)
+    bank.target_event[:] = 0
+    return bank
 
 
 @needs_native
-@pytest.mark.parametrize("gamma", [1.0, 0.95])
-def test_intra_option_agrees_with_intra_option_q_learning(gamma):
-    P, K = 40, 4
-    g = gen(9)
-    head = FourierOptionQHead(P, K, order=2, alpha=0.01)
-    head.weight.copy_(torch.randn(head.weight.shape, dtype=F64, generator=g))
-    obs, next_obs = torch.rand(P, 4, dtype=F64, generator=g), torch.rand(P, 4, dtype=F64,
-                                                                          generator=g)
-    action = torch.randint(0, 5, (P,), generator=g)
-    reward = torch.randn(P, dtype=F64, generator=g)
-    terminated = torch.rand(P, generator=g) < 0.2
-    contains = torch.rand(P, K, generator=g) < 0.6
-    reached = torch.rand(P, K, generator=g) < 0.3
-    learnable = torch.rand(P, K, generator=g) < 0.8
-    weight = head.weight.clone()
-    expected = IntraOptionQLearning(gamma, 500.0)(head, obs, action, reward, next_obs,
-                                                  terminated, contains, reached, learnable)
-    got = native_hierarchical.intra_option(weight, head.encode(obs), head.encode(next_obs),
-                                           action, reward, terminated, contains & learnable,
-                                           reached, 0.01, gamma, 500.0)
-    close(got, expected)
-    close(weight, head.weight)
-    assert bool((got != 0).sum() > P // 2)
+@pytest.mark.parametrize(("gamma", "scaled"), [(1.0, False), (0.9, False), (0.95, True)])
+def test_compiled_transition_agrees_with_the_torch_path(gamma, scaled):
+    """Random transitions with terminations, truncations and rows not stepped: the same
+    decisions and actions, TD errors and weights equal to rounding, with the discounted and
+    per-feature step sizes too."""
+    P, steps = 30, 120
+    agents = [HierarchicalAgent(half_plane_bank(P, seed=1), order=2, alpha=0.01, gamma=gamma,
+                                epsilon=0.3, option_epsilon=0.3, seed=7,
+                                scale_step_size=scaled, completion_reward=50.0, native=native)
+              for native in (False, True)]  # fmt: skip
+    g = gen(2)
+    start = torch.rand(P, 4, dtype=F64, generator=g)
+    assert torch.equal(agents[0].begin(start), agents[1].begin(start))
+    seen_options = torch.zeros((), dtype=torch.bool)
+    for _ in range(steps):
+        next_obs = torch.rand(P, 4, dtype=F64, generator=g)
+        reward = torch.randn(P, dtype=F64, generator=g)
+        terminated = torch.rand(P, generator=g) < 0.05
+        truncated = torch.rand(P, generator=g) < 0.05
+        stepped = torch.rand(P, generator=g) < 0.9
+        expected, got = (a.transition(next_obs, reward, terminated, truncated, stepped)
+                         for a in agents)  # fmt: skip
+        for key in ("decision_ended", "duration", "decision", "option", "reached"):
+            assert torch.equal(got[key], expected[key]), key
+        for key in ("decision_return", "smdp_delta", "option_delta"):
+            close(got[key], expected[key])
+        for name in ("decision", "option", "action", "duration", "contains"):
+            assert torch.equal(getattr(agents[1], name), getattr(agents[0], name)), name
+        close(agents[1].decision_return, agents[0].decision_return)
+        seen_options |= (expected["option"] >= 0).any()
+    close(agents[1].q_head.weight, agents[0].q_head.weight)
+    close(agents[1].bank.q_head.weight, agents[0].bank.q_head.weight)
+    assert bool(seen_options)  # options ran
 
 
 # ---------------------------------------------------------------------------- agents
