@@ -17,6 +17,17 @@
 #include <math.h>
 #include <stdint.h>
 
+/* NATIVE_CLONES on a kernel's entry point: GCC builds it twice, for AVX2 and for any x86-64,
+ * and picks one when the module loads. The helpers it inlines come along, so the dot products
+ * run four lanes wide where the CPU has them. The bits stay the same: each of dot's eight
+ * partial sums keeps its own order in any lane, and no multiply-add is fused (AVX2 alone
+ * brings no FMA, and -ffp-contract=off). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define NATIVE_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define NATIVE_CLONES
+#endif
+
 static inline double dot(const double *a, const double *b, long n)
 {
     double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, s4 = 0.0, s5 = 0.0, s6 = 0.0, s7 = 0.0;

@@ -47,7 +47,7 @@ static void learn_row(double *wa, const double *phi, long F, double reward, doub
 
 /* linear_q(n, D, F, w, n_rows, rows, phi, q): q[d, i] = w[d, r_i] . phi[i], with r_i = rows[i]
  * (or i when rows is 0). w is action-major [D, n_rows, F]; q is [D, n]. */
-static PyObject *linear_q(PyObject *self, PyObject *args)
+NATIVE_CLONES static PyObject *linear_q(PyObject *self, PyObject *args)
 {
     Py_ssize_t n, D, F, n_rows;
     unsigned long long w_p, rows_p, phi_p, q_p;
@@ -66,7 +66,7 @@ static PyObject *linear_q(PyObject *self, PyObject *args)
 
 /* sarsa_learn(n, D, F, w, phi, action, reward, q_next, terminated, step, step_stride, gamma,
  * use_gamma): one Sarsa update of row i's action[i] (terminated: uint8 [n] or 0). */
-static PyObject *sarsa_learn(PyObject *self, PyObject *args)
+NATIVE_CLONES static PyObject *sarsa_learn(PyObject *self, PyObject *args)
 {
     Py_ssize_t n, D, F, step_stride;
     unsigned long long w_p, phi_p, a_p, r_p, qn_p, t_p, step_p;
@@ -90,7 +90,7 @@ static PyObject *sarsa_learn(PyObject *self, PyObject *args)
  * step_stride, gamma, use_gamma, next_action): for each row, Q(s', .) with the weights before
  * this step's update, the tabulated epsilon-greedy choice a' (table[i*table_row + slot + code]),
  * then the Sarsa update of (s, a) toward r + gamma Q(s', a'). Writes a' to next_action. */
-static PyObject *sarsa_observe(PyObject *self, PyObject *args)
+NATIVE_CLONES static PyObject *sarsa_observe(PyObject *self, PyObject *args)
 {
     Py_ssize_t n, D, F, table_row, slot, step_stride;
     unsigned long long w_p, phi_p, phi1_p, a_p, r_p, table_p, step_p, out_p;

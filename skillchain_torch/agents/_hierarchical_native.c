@@ -33,7 +33,7 @@
 /* Top-level values of the decisions needed at a state (the first `dense` whenever any of them
  * is available, the others where available; all 0 unless `decide`), then the epsilon-greedy
  * decision among the available ones. As LinearQHead.forward_mask + epsilon_greedy. */
-static int64_t choose_row(const double *w, const double *phi, const uint8_t *ok, Py_ssize_t D,
+NATIVE_CLONES static int64_t choose_row(const double *w, const double *phi, const uint8_t *ok, Py_ssize_t D,
                           Py_ssize_t F, Py_ssize_t dense, int decide, double epsilon,
                           const double *u, double *q)
 {
@@ -48,7 +48,7 @@ static int64_t choose_row(const double *w, const double *phi, const uint8_t *ok,
 
 /* The primitive action: min(decision, A - 1), or option `option`'s epsilon-greedy action by
  * its values w_opt[option, a] . code. */
-static int64_t act_row(const double *w_opt, const double *code, int64_t decision,
+NATIVE_CLONES static int64_t act_row(const double *w_opt, const double *code, int64_t decision,
                        int64_t option, Py_ssize_t A, Py_ssize_t Fo, double epsilon,
                        const double *u)
 {
@@ -61,7 +61,7 @@ static int64_t act_row(const double *w_opt, const double *code, int64_t decision
 
 /* SMDP Sarsa: delta = (R + gamma^k q_next [not terminal]) - wd . phi, wd += step * (delta phi).
  * gamma^k is libm's pow, as Python's gamma ** k in SarsaUpdate's table. */
-static double smdp_row(double *wd, const double *phi, Py_ssize_t F, double R, int64_t k,
+NATIVE_CLONES static double smdp_row(double *wd, const double *phi, Py_ssize_t F, double R, int64_t k,
                        double q_next, int terminal, const double *step, Py_ssize_t stride,
                        double gamma, int use_gamma)
 {
@@ -76,7 +76,7 @@ static double smdp_row(double *wd, const double *phi, Py_ssize_t F, double R, in
 /* Intra-option Q-learning of one option (weights wk [A, Fo]) from (s, a, r, s'):
  * target = (r + C [reached]) + gamma max_b wk[b] . x1 [neither reached nor terminated],
  * delta = target - wk[a] . x, wk[a] += (alpha delta) x. */
-static double intra_row(double *wk, const double *x, const double *x1, int64_t a, double r,
+NATIVE_CLONES static double intra_row(double *wk, const double *x, const double *x1, int64_t a, double r,
                         int reached, int terminated, Py_ssize_t A, Py_ssize_t Fo, double alpha,
                         double gamma, double completion)
 {
@@ -99,7 +99,7 @@ static double intra_row(double *wk, const double *x, const double *x1, int64_t a
 /* choose(P, D, F, w, phi, available, rows, dense, u, u_stride, epsilon, q, decision):
  * choose_row for every agent (values only for `rows`), w [P, D, F], u [P, >= 2] rows
  * u_stride apart. */
-static PyObject *choose(PyObject *self, PyObject *args)
+NATIVE_CLONES static PyObject *choose(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, D, F, dense, u_stride;
     unsigned long long w_p, phi_p, av_p, rows_p, u_p, q_p, dec_p;
@@ -123,7 +123,7 @@ static PyObject *choose(PyObject *self, PyObject *args)
 
 /* act(P, K, A, Fo, w, code, rows, decision, option, u, u_stride, epsilon, action): act_row for
  * the rows in `rows` (w [P, K, A, Fo]); other rows keep their action. */
-static PyObject *act(PyObject *self, PyObject *args)
+NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, A, Fo, u_stride;
     unsigned long long w_p, code_p, rows_p, dec_p, opt_p, u_p, act_p;
@@ -169,7 +169,7 @@ static PyObject *act(PyObject *self, PyObject *args)
  * heads' Fourier features among the top level's, shared_fourier_columns). value [P] (or 0):
  * Q(s', d) of the decision d in force after the step, for stepped rows (skill chaining's
  * gestation samples). */
-static PyObject *step(PyObject *self, PyObject *args)
+NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, A, F, Fo, step_stride;
     unsigned long long w_p, wo_p, obs_p, code_p, con_p, phi_p, dec_p, opt_p, act_p, ret_p,

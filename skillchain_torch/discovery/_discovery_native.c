@@ -51,9 +51,26 @@ static PyObject *target_indicator(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
-/* event_list(P, K, E, parent, target_event, status, max_branching, base_on, slot_on): the
- * target events on each agent's list: base event e while fewer than max_branching live
- * options target it; slot j's set once LEARNED, while fewer than max_branching target it. */
+/* One agent's list of target events (K slots, E base events): base event e while fewer than
+ * max_branching live options target it; slot j's set once LEARNED, while fewer than
+ * max_branching target it. */
+static void listed(const int64_t *par, const int64_t *te, const int64_t *st, Py_ssize_t K,
+                   Py_ssize_t E, Py_ssize_t max_branching, uint8_t *base_on, uint8_t *slot_on)
+{
+    for (Py_ssize_t e = 0; e < E; e++) {
+        Py_ssize_t n = 0;
+        for (Py_ssize_t k = 0; k < K; k++) n += st[k] != 0 && par[k] < 0 && te[k] == e;
+        base_on[e] = (uint8_t)(n < max_branching);
+    }
+    for (Py_ssize_t j = 0; j < K; j++) {
+        Py_ssize_t n = 0;
+        for (Py_ssize_t k = 0; k < K; k++) n += st[k] != 0 && par[k] == j;
+        slot_on[j] = (uint8_t)(st[j] == LEARNED && n < max_branching);
+    }
+}
+
+/* event_list(P, K, E, parent, target_event, status, max_branching, base_on, slot_on): each
+ * agent's list of target events (see listed). */
 static PyObject *event_list(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, E, max_branching;
@@ -65,19 +82,9 @@ static PyObject *event_list(PyObject *self, PyObject *args)
     const int64_t *target_event = (const int64_t *)(uintptr_t)te_p;
     const int64_t *status = (const int64_t *)(uintptr_t)st_p;
     uint8_t *base_on = (uint8_t *)(uintptr_t)bo_p, *slot_on = (uint8_t *)(uintptr_t)so_p;
-    for (Py_ssize_t p = 0; p < P; p++) {
-        const int64_t *par = parent + p * K, *te = target_event + p * K, *st = status + p * K;
-        for (Py_ssize_t e = 0; e < E; e++) {
-            Py_ssize_t n = 0;
-            for (Py_ssize_t k = 0; k < K; k++) n += st[k] != 0 && par[k] < 0 && te[k] == e;
-            base_on[p * E + e] = (uint8_t)(n < max_branching);
-        }
-        for (Py_ssize_t j = 0; j < K; j++) {
-            Py_ssize_t n = 0;
-            for (Py_ssize_t k = 0; k < K; k++) n += st[k] != 0 && par[k] == j;
-            slot_on[p * K + j] = (uint8_t)(st[j] == LEARNED && n < max_branching);
-        }
-    }
+    for (Py_ssize_t p = 0; p < P; p++)
+        listed(parent + p * K, target_event + p * K, status + p * K, K, E, max_branching,
+               base_on + p * E, slot_on + p * K);
     Py_RETURN_NONE;
 }
 
@@ -123,20 +130,22 @@ static PyObject *record(PyObject *self, PyObject *args)
 }
 
 /* triggers(P, K, E, parent, target_event, status, base_now, base_next, contains,
- * contains_next, reached, stepped, sample, gestation_q, out_gestation_q, out_base_trig,
- * out_slot_trig, out_base_now) -> bool: for the stepped rows, the base events and the LEARNED
- * options' sets the transition entered (false at s, true at s'), and the gestating options
- * whose target it entered take max(their sample, sample[p]); returns whether anything was
- * triggered. */
+ * contains_next, reached, stepped, sample, gestation_q, max_branching, out_gestation_q,
+ * out_base_trig, out_slot_trig, out_base_now) -> bool: for the stepped rows, the base events
+ * and the LEARNED options' sets the transition entered (false at s, true at s'), and the
+ * gestating options whose target it entered take max(their sample, sample[p]); returns
+ * whether an event on its agent's list (see listed) was triggered: only those can create. */
 static PyObject *triggers(PyObject *self, PyObject *args)
 {
-    Py_ssize_t P, K, E;
+    Py_ssize_t P, K, E, max_branching;
     unsigned long long par_p, te_p, st_p, bn_p, bx_p, con_p, conx_p, reach_p, step_p, sam_p,
         gq_p, ogq_p, obt_p, ost_p, obn_p;
-    if (!PyArg_ParseTuple(args, "nnnKKKKKKKKKKKKKKK", &P, &K, &E, &par_p, &te_p, &st_p, &bn_p,
-                          &bx_p, &con_p, &conx_p, &reach_p, &step_p, &sam_p, &gq_p, &ogq_p,
-                          &obt_p, &ost_p, &obn_p))
+    if (!PyArg_ParseTuple(args, "nnnKKKKKKKKKKKnKKKK", &P, &K, &E, &par_p, &te_p, &st_p, &bn_p,
+                          &bx_p, &con_p, &conx_p, &reach_p, &step_p, &sam_p, &gq_p,
+                          &max_branching, &ogq_p, &obt_p, &ost_p, &obn_p))
         return NULL;
+    uint8_t *base_on = (uint8_t *)malloc((size_t)(K + E + 1)), *slot_on = base_on + E;
+    if (!base_on) return PyErr_NoMemory();
     const int64_t *parent = (const int64_t *)(uintptr_t)par_p;
     const int64_t *target_event = (const int64_t *)(uintptr_t)te_p;
     const int64_t *status = (const int64_t *)(uintptr_t)st_p;
@@ -153,7 +162,7 @@ static PyObject *triggers(PyObject *self, PyObject *args)
     uint8_t *out_base_now = (uint8_t *)(uintptr_t)obn_p;
     int any = 0;
     for (Py_ssize_t p = 0; p < P; p++) {
-        int go = stepped[p];
+        int go = stepped[p], fired = 0;
         const int64_t *par = parent + p * K, *te = target_event + p * K, *st = status + p * K;
         for (Py_ssize_t k = 0; k < K; k++) {
             Py_ssize_t s = p * K + k;
@@ -166,15 +175,20 @@ static PyObject *triggers(PyObject *self, PyObject *args)
             }
             out_gq[s] = q;
             slot_trig[s] = (uint8_t)(go && !contains[s] && contains_next[s] && st[k] == LEARNED);
-            any |= slot_trig[s];
+            fired |= slot_trig[s];
         }
         for (Py_ssize_t e = 0; e < E; e++) {
             Py_ssize_t s = p * E + e;
             base_trig[s] = (uint8_t)(go && !base_now[s] && base_next[s]);
-            any |= base_trig[s];
+            fired |= base_trig[s];
             out_base_now[s] = go ? base_next[s] : base_now[s];
         }
+        if (!fired || any) continue;
+        listed(par, te, st, K, E, max_branching, base_on, slot_on);
+        for (Py_ssize_t k = 0; k < K; k++) any |= slot_trig[p * K + k] && slot_on[k];
+        for (Py_ssize_t e = 0; e < E; e++) any |= base_trig[p * E + e] && base_on[e];
     }
+    free(base_on);
     return PyBool_FromLong(any);
 }
 

@@ -33,7 +33,7 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.discovery import native_discovery
-from skillchain_torch.options import OptionQHead
+from skillchain_torch.options import InitiationClassifier, OptionQHead, native_initiation
 
 __all__ = ["execution_outcome", "ExecutionTrace"]
 
@@ -108,6 +108,24 @@ class ExecutionTrace:
         take = positive | negative  # [P, T]
         agents, step = take.nonzero().unbind(-1)
         return agents, slot[agents], self.states[agents, step], positive[agents, step]
+
+    def store_examples(self, classifier: InitiationClassifier, slot: Tensor, duration: Tensor,
+                       success: Tensor, failure: Tensor) -> Tensor:  # fmt: skip
+        """Add the :meth:`examples` of ended executions to ``classifier`` (slot ``slot [P]``
+        of each agent); the ``[P, K]`` mask of slots that received data.
+
+        A compiled classifier stores them straight from the trace (the same examples in the
+        same order, so the same stores)."""
+        if classifier.native and self.states.dtype == torch.float64:
+            touched = torch.zeros(classifier.population, classifier.slots, dtype=torch.bool)
+            native_initiation.store_executions(classifier, self.states, slot, duration,
+                                               success, failure, touched)  # fmt: skip
+            classifier.dirty |= touched
+            return touched
+        agents, slots, obs, labels = self.examples(slot, duration, success, failure)
+        if agents.numel() == 0:
+            return torch.zeros_like(classifier.dirty)
+        return classifier.add_examples(agents, slots, obs, labels)
 
     def drop_updates(self, slot: Tensor, failure: Tensor) -> None:
         """Put the options of failed executions back as they were when they started."""

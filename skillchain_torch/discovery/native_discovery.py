@@ -90,10 +90,11 @@ def record(states: Tensor, rows: Tensor, step: Tensor, obs: Tensor) -> None:
 
 def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Tensor,
              base_next: Tensor, contains: Tensor, contains_next: Tensor, reached: Tensor,
-             stepped: Tensor, sample: Tensor,
-             gestation_q: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor, bool]:  # fmt: skip
-    """One step's ``(gestation_q, base_trig, slot_trig, base_now, any_trig)`` of
-    :meth:`~.skill_chaining.SkillChaining.after_transition` (new tensors)."""
+             stepped: Tensor, sample: Tensor, gestation_q: Tensor,
+             max_branching: int) -> tuple[Tensor, Tensor, Tensor, Tensor, bool]:  # fmt: skip
+    """One step's ``(gestation_q, base_trig, slot_trig, base_now, any_listed)`` of
+    :meth:`~.skill_chaining.SkillChaining.after_transition` (new tensors); ``any_listed``: an
+    event on its agent's list (:func:`event_list`) was triggered, so a creation may follow."""
     P, K = status.shape
     E = base_now.shape[1]
     parent, target_event, status = (x.contiguous() for x in (parent, target_event, status))
@@ -103,8 +104,8 @@ def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Ten
     out_q = torch.empty(P, K, dtype=torch.float64)
     base_trig, slot_trig = torch.empty(P, E, dtype=torch.bool), torch.empty(P, K, dtype=torch.bool)
     out_base_now = torch.empty(P, E, dtype=torch.bool)
-    any_trig = _c.triggers(P, K, E, parent.data_ptr(), target_event.data_ptr(), status.data_ptr(),
+    any_listed = _c.triggers(P, K, E, parent.data_ptr(), target_event.data_ptr(), status.data_ptr(),
                            *(x.data_ptr() for x in flags), sample.data_ptr(),
-                           gestation_q.data_ptr(), out_q.data_ptr(),
+                           gestation_q.data_ptr(), int(max_branching), out_q.data_ptr(),
                            base_trig.data_ptr(), slot_trig.data_ptr(), out_base_now.data_ptr())
-    return out_q, base_trig, slot_trig, out_base_now, any_trig
+    return out_q, base_trig, slot_trig, out_base_now, any_listed

@@ -187,12 +187,12 @@ class SkillChaining:
                                 terminated)  # fmt: skip
         sample = value  # Q(s, d) of the decision in force
         if native_discovery.applies(contains, stepped):  # the same rules, compiled
-            self.gestation_q, base_trig, slot_trig, self.base_now, any_trig = (
+            self.gestation_q, base_trig, slot_trig, self.base_now, any_listed = (
                 native_discovery.triggers(bank.parent, bank.target_event, bank.status,
                                           self.base_now, self._base_next, contains,
                                           contains_next, reached, stepped, sample,
-                                          self.gestation_q))  # fmt: skip
-            if not any_trig:
+                                          self.gestation_q, self.max_branching))  # fmt: skip
+            if not any_listed:  # only listed events create
                 return torch.zeros_like(stepped)
             return self._create(base_trig, slot_trig, contains, option, sample)
         gestating = bank.status == OptionStatus.GESTATING
@@ -220,19 +220,16 @@ class SkillChaining:
         hit = reached.gather(1, slot[:, None])[:, 0]
         success, failure = execution_outcome(hit, duration, terminated, self.max_option_steps)
         success, failure = success & ended, failure & ended
-        agents, slots, obs, labels = self.trace.examples(slot, duration, success, failure)
-        if agents.numel() > 0:
-            classifier = self.bank.classifier
-            touched = classifier.add_examples(agents, slots, obs, labels)
-            # Paper: 100 sweeps per new data point. Logistic regression on failures alone says
-            # "no" everywhere (the features are non-negative), so an option whose first
-            # executions all fail leaves the repertoire; wait_for_both_classes keeps such a set
-            # "true everywhere" until it has seen a success and a failure instead.
-            fit = touched & classifier.has_both_classes() if self.wait_for_both_classes \
-                else touched
-            if bool(fit.any()):
-                classifier.fit(fit)
-                self.fitted |= fit
+        classifier = self.bank.classifier
+        touched = self.trace.store_examples(classifier, slot, duration, success, failure)
+        # Paper: 100 sweeps per new data point. Logistic regression on failures alone says
+        # "no" everywhere (the features are non-negative), so an option whose first executions
+        # all fail leaves the repertoire; wait_for_both_classes keeps such a set "true
+        # everywhere" until it has seen a success and a failure instead.
+        fit = touched & classifier.has_both_classes() if self.wait_for_both_classes else touched
+        if bool(fit.any()):
+            classifier.fit(fit)
+            self.fitted |= fit
         if bool(failure.any()):
             self.trace.drop_updates(slot, failure)
 

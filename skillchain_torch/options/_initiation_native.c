@@ -66,7 +66,7 @@ static void polynomial_row(const double *obs, const int64_t *factor_index, Py_ss
  * and for constrained slots also near a stored positive. factor_index [F, degree] (int64),
  * weight [P, K, F], bias [P, K], obs [P, 4], examples [P, K, C, 4], labels [P, K, C],
  * count [P, K] (int64), dims uint8 [4]. */
-static PyObject *contains(PyObject *self, PyObject *args)
+NATIVE_CLONES static PyObject *contains(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, F, C, degree;
     unsigned long long fi_p, w_p, b_p, tr_p, co_p, obs_p, ex_p, lab_p, cnt_p, dims_p, out_p;
@@ -105,10 +105,30 @@ static PyObject *contains(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
-/* sweeps(M, L, F1, x, step, minus_step_y, v, n_sweeps): for each slot m, n_sweeps times:
- * z_l = x_l . v, g_l = minus_step_y_l + step_l / (exp(z_l) + 1), v += sum_l x_l g_l.
- * x [M, L, F1] (last feature the constant 1), step and minus_step_y [M, L], v [M, F1] in
- * place. Places with step 0 (empty) add exactly nothing and are skipped. */
+/* n_sweeps gradient steps of one slot over its first L examples (x [L, F1], the last feature
+ * the constant 1; v [F1], the negated parameters, in place): z_l = x_l . v,
+ * g_l = minus_step_y_l + step_l / (exp(z_l) + 1), v += sum_l x_l g_l. Places with step 0
+ * (empty) add exactly nothing and are skipped. Each sweep first finds every g_l (independent
+ * given v, so the exps overlap), then sums in the order of l. dv: scratch [F1], g: [L]. */
+NATIVE_CLONES static void sweep_slot(const double *x, const double *step, const double *msy,
+                                     double *v, Py_ssize_t L, Py_ssize_t F1, Py_ssize_t n_sweeps,
+                                     double *dv, double *g)
+{
+    for (Py_ssize_t it = 0; it < n_sweeps; it++) {
+        for (Py_ssize_t l = 0; l < L; l++)
+            g[l] = step[l] == 0.0 ? 0.0 : msy[l] + step[l] / (exp(dot(x + l * F1, v, F1)) + 1.0);
+        for (Py_ssize_t f = 0; f < F1; f++) dv[f] = 0.0;
+        for (Py_ssize_t l = 0; l < L; l++) {
+            if (step[l] == 0.0) continue;
+            const double *xl = x + l * F1;
+            for (Py_ssize_t f = 0; f < F1; f++) dv[f] += xl[f] * g[l];
+        }
+        for (Py_ssize_t f = 0; f < F1; f++) v[f] += dv[f];
+    }
+}
+
+/* sweeps(M, L, F1, x, step, minus_step_y, v, n_sweeps): sweep_slot for each of M slots.
+ * x [M, L, F1], step and minus_step_y [M, L], v [M, F1] in place. */
 static PyObject *sweeps(PyObject *self, PyObject *args)
 {
     Py_ssize_t M, L, F1, n_sweeps;
@@ -119,29 +139,217 @@ static PyObject *sweeps(PyObject *self, PyObject *args)
     const double *x = (const double *)(uintptr_t)x_p, *step = (const double *)(uintptr_t)step_p;
     const double *msy = (const double *)(uintptr_t)msy_p;
     double *v = (double *)(uintptr_t)v_p;
-    double *dv = (double *)malloc(sizeof(double) * (size_t)(F1 > 0 ? F1 : 1));
+    double *dv = (double *)malloc(sizeof(double) * (size_t)(F1 + L + 1));
     if (!dv) return PyErr_NoMemory();
-    for (Py_ssize_t m = 0; m < M; m++) {
-        const double *xm = x + m * L * F1, *sm = step + m * L, *ym = msy + m * L;
-        double *vm = v + m * F1;
-        for (Py_ssize_t it = 0; it < n_sweeps; it++) {
-            for (Py_ssize_t f = 0; f < F1; f++) dv[f] = 0.0;
-            for (Py_ssize_t l = 0; l < L; l++) {
-                if (sm[l] == 0.0) continue;
-                const double *xl = xm + l * F1;
-                double g = ym[l] + sm[l] / (exp(dot(xl, vm, F1)) + 1.0);
-                for (Py_ssize_t f = 0; f < F1; f++) dv[f] += xl[f] * g;
-            }
-            for (Py_ssize_t f = 0; f < F1; f++) vm[f] += dv[f];
-        }
-    }
+    for (Py_ssize_t m = 0; m < M; m++)
+        sweep_slot(x + m * L * F1, step + m * L, msy + m * L, v + m * F1, L, F1, n_sweeps, dv,
+                   dv + F1);
     free(dv);
     Py_RETURN_NONE;
+}
+
+/* fit(P, K, C, F, factor_index, degree, centered, mask, examples, labels, count, weight, bias,
+ * lr, n_sweeps, balanced, sweeps_done, trained, dirty, fitted): InitiationClassifier.fit for
+ * every slot in mask (uint8 [P, K]) that stores an example, in place on weight [P, K, F] and
+ * bias [P, K]; those slots get sweeps_done += n_sweeps, trained = 1, dirty = 0, fitted = 1
+ * (fitted = 0 elsewhere). The numbers are those of logistic.sweep_terms and the sweeps above:
+ * the polynomial features of the slot's `count` stored examples with a constant 1 appended;
+ * each example's step is lr / count, or lr * 0.5 / (its class's count, at least 1) when
+ * balanced; minus_step_y is -(step * y); v starts at -(weight, bias) and the result is -v. */
+static PyObject *fit(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K, C, F, degree, n_sweeps;
+    unsigned long long fi_p, mask_p, ex_p, lab_p, cnt_p, w_p, b_p, done_p, tr_p, dirty_p, out_p;
+    int centered, balanced;
+    double lr;
+    if (!PyArg_ParseTuple(args, "nnnnKniKKKKKKdniKKKK", &P, &K, &C, &F, &fi_p, &degree,
+                          &centered, &mask_p, &ex_p, &lab_p, &cnt_p, &w_p, &b_p, &lr, &n_sweeps,
+                          &balanced, &done_p, &tr_p, &dirty_p, &out_p))
+        return NULL;
+    int64_t *sweeps_done = (int64_t *)(uintptr_t)done_p;
+    uint8_t *trained = (uint8_t *)(uintptr_t)tr_p, *dirty = (uint8_t *)(uintptr_t)dirty_p;
+    uint8_t *fitted = (uint8_t *)(uintptr_t)out_p;
+    const int64_t *factor_index = (const int64_t *)(uintptr_t)fi_p;
+    const uint8_t *mask = (const uint8_t *)(uintptr_t)mask_p;
+    const double *examples = (const double *)(uintptr_t)ex_p;
+    const uint8_t *labels = (const uint8_t *)(uintptr_t)lab_p;
+    const int64_t *count = (const int64_t *)(uintptr_t)cnt_p;
+    double *weight = (double *)(uintptr_t)w_p, *bias = (double *)(uintptr_t)b_p;
+    Py_ssize_t F1 = F + 1;
+    double *x = (double *)malloc(sizeof(double) * (size_t)(C * F1 + 3 * C + 2 * F1 + 1));
+    if (!x) return PyErr_NoMemory();
+    double *step = x + C * F1, *msy = step + C, *g = msy + C, *v = g + C, *dv = v + F1;
+    for (Py_ssize_t s = 0; s < P * K; s++) {
+        Py_ssize_t L = (Py_ssize_t)count[s];
+        fitted[s] = mask[s] && L > 0;
+        if (!fitted[s]) continue;
+        if (L > C) L = C;
+        sweeps_done[s] += n_sweeps;
+        trained[s] = 1;
+        dirty[s] = 0;
+        const uint8_t *y = labels + s * C;
+        double positives = 0.0;
+        for (Py_ssize_t l = 0; l < L; l++) {
+            polynomial_row(examples + (s * C + l) * OBS_DIM, factor_index, F, degree, centered,
+                           x + l * F1);
+            x[l * F1 + F] = 1.0;
+            positives += y[l] ? 1.0 : 0.0;
+        }
+        double negatives = (double)L - positives;
+        for (Py_ssize_t l = 0; l < L; l++) {
+            double weight_l = balanced ? 0.5 / (y[l] ? fmax(positives, 1.0) : fmax(negatives, 1.0))
+                                       : 1.0 / (double)L;
+            step[l] = lr * weight_l;
+            msy[l] = -(step[l] * (y[l] ? 1.0 : 0.0));
+        }
+        double *w = weight + s * F;
+        for (Py_ssize_t f = 0; f < F; f++) v[f] = -w[f];
+        v[F] = -bias[s];
+        sweep_slot(x, step, msy, v, L, F1, n_sweeps, dv, g);
+        for (Py_ssize_t f = 0; f < F; f++) w[f] = -v[f];
+        bias[s] = -v[F];
+    }
+    free(x);
+    Py_RETURN_NONE;
+}
+
+#define GOLDEN_GAMMA 0x9E3779B97F4A7C15ULL
+
+/* SplitMix64's output function (as skillchain_torch.rng.splitmix64, uint64 wrap-around). */
+static uint64_t splitmix64(uint64_t x)
+{
+    uint64_t z = x + GOLDEN_GAMMA;
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+/* The classifier's stores, as passed to store and store_executions after their own
+ * arguments: seeds, generation, salt, ring, seen, examples, labels, count, touched. */
+typedef struct {
+    const int64_t *seeds, *generation;
+    uint64_t salt;
+    int ring;
+    int64_t *seen, *count;
+    double *examples;
+    uint8_t *labels, *touched;
+} Stores;
+
+#define STORES_FORMAT "KKLiKKKKK"
+
+static Stores make_stores(unsigned long long seeds_p, unsigned long long gen_p, long long salt,
+                          int ring, unsigned long long seen_p, unsigned long long ex_p,
+                          unsigned long long lab_p, unsigned long long cnt_p,
+                          unsigned long long t_p)
+{
+    Stores st = {(const int64_t *)(uintptr_t)seeds_p, (const int64_t *)(uintptr_t)gen_p,
+                 (uint64_t)salt, ring, (int64_t *)(uintptr_t)seen_p, (int64_t *)(uintptr_t)cnt_p,
+                 (double *)(uintptr_t)ex_p, (uint8_t *)(uintptr_t)lab_p,
+                 (uint8_t *)(uintptr_t)t_p};
+    return st;
+}
+
+/* Store one example of agent p's slot k as add_examples does: the example numbered `seen` of
+ * its slot takes place `seen` while the slot has room, then (ring) place seen % C, or
+ * (reservoir) place min(floor(u (seen + 1)), seen) if that is below C, with
+ * u = examples.reservoir_uniform(seed, slot, generation, seen); seen, count (= min(seen, C))
+ * and touched follow. */
+static void store_in(const Stores *st, int64_t p, int64_t k, int64_t K, int64_t C,
+                     const double *point, int label)
+{
+    int64_t s = p * K + k;
+    int64_t index = st->seen[s]++;
+    int64_t place = index;
+    if (st->ring) {
+        place = index % C;
+    } else if (index >= C) {
+        uint64_t key = splitmix64((uint64_t)st->seeds[p] ^ st->salt);
+        key = splitmix64(key + (uint64_t)k * GOLDEN_GAMMA);
+        key = splitmix64(key + (uint64_t)st->generation[s] * GOLDEN_GAMMA);
+        uint64_t bits = splitmix64(key + (uint64_t)index * GOLDEN_GAMMA) >> 11;
+        double u = (double)(int64_t)bits * 0x1p-53;
+        int64_t draw = (int64_t)floor(u * (double)(index + 1));
+        if (draw > index) draw = index;
+        place = draw < C ? draw : -1;
+    }
+    st->touched[s] = 1;
+    st->count[s] = st->seen[s] < C ? st->seen[s] : C;
+    if (place < 0) return;
+    double *e = st->examples + (s * C + place) * OBS_DIM;
+    for (int j = 0; j < OBS_DIM; j++) e[j] = point[j];
+    st->labels[s * C + place] = (uint8_t)(label != 0);
+}
+
+/* store(P, K, C, n, agents, slots, obs, new_labels, <stores>): add_examples's stores of n
+ * examples (obs [n, 4], new_labels uint8 [n]) for (agents, slots) (int64 [n]), one after the
+ * other (as examples.store_places has it). Returns -1 (nothing written) if an agent or slot
+ * index is out of range, else 0. */
+static PyObject *store(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K, C, n;
+    unsigned long long a_p, k_p, obs_p, nl_p, seeds_p, gen_p, seen_p, ex_p, lab_p, cnt_p, t_p;
+    long long salt;
+    int ring;
+    if (!PyArg_ParseTuple(args, "nnnnKKKK" STORES_FORMAT, &P, &K, &C, &n, &a_p, &k_p, &obs_p,
+                          &nl_p, &seeds_p, &gen_p, &salt, &ring, &seen_p, &ex_p, &lab_p, &cnt_p,
+                          &t_p))
+        return NULL;
+    Stores st = make_stores(seeds_p, gen_p, salt, ring, seen_p, ex_p, lab_p, cnt_p, t_p);
+    const int64_t *agents = (const int64_t *)(uintptr_t)a_p;
+    const int64_t *slots = (const int64_t *)(uintptr_t)k_p;
+    const double *obs = (const double *)(uintptr_t)obs_p;
+    const uint8_t *new_labels = (const uint8_t *)(uintptr_t)nl_p;
+    for (Py_ssize_t i = 0; i < n; i++)
+        if (agents[i] < 0 || agents[i] >= P || slots[i] < 0 || slots[i] >= K)
+            return PyLong_FromLong(-1);
+    for (Py_ssize_t i = 0; i < n; i++)
+        store_in(&st, agents[i], slots[i], K, C, obs + i * OBS_DIM, new_labels[i]);
+    return PyLong_FromLong(0);
+}
+
+/* store_executions(P, K, C, T, states, slot, duration, success, failure, <stores>): the
+ * examples of ended executions, as ExecutionTrace.examples lists them (agent by agent): the
+ * first min(duration, T) states [P, T, 4] of a success are positives, the first state of a
+ * failure a negative, stored in slot[p]. Returns the number of examples. */
+static PyObject *store_executions(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K, C, T;
+    unsigned long long st_p, k_p, d_p, ok_p, bad_p, seeds_p, gen_p, seen_p, ex_p, lab_p, cnt_p,
+        t_p;
+    long long salt;
+    int ring;
+    if (!PyArg_ParseTuple(args, "nnnnKKKKK" STORES_FORMAT, &P, &K, &C, &T, &st_p, &k_p, &d_p,
+                          &ok_p, &bad_p, &seeds_p, &gen_p, &salt, &ring, &seen_p, &ex_p, &lab_p,
+                          &cnt_p, &t_p))
+        return NULL;
+    Stores st = make_stores(seeds_p, gen_p, salt, ring, seen_p, ex_p, lab_p, cnt_p, t_p);
+    const double *states = (const double *)(uintptr_t)st_p;
+    const int64_t *slot = (const int64_t *)(uintptr_t)k_p;
+    const int64_t *duration = (const int64_t *)(uintptr_t)d_p;
+    const uint8_t *success = (const uint8_t *)(uintptr_t)ok_p;
+    const uint8_t *failure = (const uint8_t *)(uintptr_t)bad_p;
+    long stored = 0;
+    for (Py_ssize_t p = 0; p < P; p++) {
+        const double *trajectory = states + p * T * OBS_DIM;
+        if (success[p]) {
+            int64_t steps = duration[p] < T ? duration[p] : T;
+            for (int64_t t = 0; t < steps; t++, stored++)
+                store_in(&st, p, slot[p], K, C, trajectory + t * OBS_DIM, 1);
+        } else if (failure[p]) {
+            store_in(&st, p, slot[p], K, C, trajectory, 0);
+            stored++;
+        }
+    }
+    return PyLong_FromLong(stored);
 }
 
 static PyMethodDef methods[] = {
     {"contains", contains, METH_VARARGS, "Initiation-set memberships of one state per agent."},
     {"sweeps", sweeps, METH_VARARGS, "Logistic-regression gradient sweeps of some slots."},
+    {"fit", fit, METH_VARARGS, "A classifier's fits of the slots in a mask, in place."},
+    {"store", store, METH_VARARGS, "A classifier's example stores, one example at a time."},
+    {"store_executions", store_executions, METH_VARARGS,
+     "The examples of ended executions into a classifier's stores."},
     {NULL, NULL, 0, NULL},
 };
 

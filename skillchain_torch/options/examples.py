@@ -25,10 +25,10 @@ from torch import Tensor
 
 from skillchain_torch.rng import GOLDEN_GAMMA, logical_rshift, splitmix64, stream_key
 
-__all__ = ["REPLACEMENTS", "reservoir_uniform", "store_places"]
+__all__ = ["REPLACEMENTS", "RESERVOIR_STREAM", "reservoir_uniform", "store_places"]
 
 REPLACEMENTS = ("reservoir", "ring")
-_RESERVOIR_STREAM = stream_key(0x1417)
+RESERVOIR_STREAM = stream_key(0x1417)  # the reservoir's salt (also read by the C stores)
 
 
 def reservoir_uniform(seed: Tensor, slot: Tensor, generation: Tensor, index: Tensor) -> Tensor:
@@ -37,7 +37,7 @@ def reservoir_uniform(seed: Tensor, slot: Tensor, generation: Tensor, index: Ten
     Stateless hashing (SplitMix64 chained over the four integers) rather than a counter: the
     draw for an agent's ``index``-th example of a slot never depends on other agents or slots.
     """
-    key = splitmix64(seed ^ _RESERVOIR_STREAM)
+    key = splitmix64(seed ^ RESERVOIR_STREAM)
     key = splitmix64(key + slot * GOLDEN_GAMMA)
     key = splitmix64(key + generation * GOLDEN_GAMMA)
     return logical_rshift(splitmix64(key + index * GOLDEN_GAMMA), 11).to(torch.float64) * 2.0**-53

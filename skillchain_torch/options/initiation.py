@@ -37,6 +37,16 @@ from skillchain_torch.options.status import agent_index, agent_seeds, check_slot
 _POINTS_CHUNK = 8192  # points per membership evaluation (bounds the [N, M] distance matrix)
 
 
+def _f64(x: Tensor) -> Tensor:
+    x = x if x.dtype == torch.float64 else x.to(torch.float64)
+    return x if x.is_contiguous() else x.contiguous()
+
+
+def _bool(x: Tensor) -> Tensor:
+    x = x if x.dtype == torch.bool else x.to(torch.bool)
+    return x if x.is_contiguous() else x.contiguous()
+
+
 class InitiationClassifier(nn.Module):
     """Population-batched logistic-regression initiation sets with bounded example stores.
 
@@ -301,6 +311,14 @@ class InitiationClassifier(nn.Module):
             raise ValueError(f"labels must be [N={n}], got {tuple(labels.shape)}")
         p = torch.as_tensor(agents, dtype=torch.int64, device=device).expand(n)
         k = torch.as_tensor(slots, dtype=torch.int64, device=device).expand(n)
+        if self.native:  # one compiled pass, the same places and bits
+            touched = torch.zeros(self.population, self.slots, dtype=torch.bool)
+            if not native_initiation.store(self, p.contiguous(), k.contiguous(), _f64(obs),
+                                           _bool(labels), touched):  # fmt: skip
+                raise ValueError(f"agent/slot indices out of range for P={self.population}, "
+                                 f"K={self.slots}")  # fmt: skip
+            self.dirty |= touched
+            return touched
         if bool(((p < 0) | (p >= self.population) | (k < 0) | (k >= self.slots)).any()):
             raise ValueError(f"agent/slot indices out of range for P={self.population}, "
                              f"K={self.slots}")  # fmt: skip
@@ -340,6 +358,11 @@ class InitiationClassifier(nn.Module):
         own count only: its numbers are the same whatever else is fitted with it.
         """
         mask = self.dirty if mask is None else check_slot_mask(mask, self.population, self.slots)
+        if self.native:  # every slot in one compiled pass, the same bits
+            return native_initiation.fit(
+                self.features, self.centered, _bool(mask), self.examples, self.labels,
+                self.count, self.weight, self.bias, self.lr, self.sweeps, self.balanced,
+                self.sweeps_done, self.trained, self.dirty)  # fmt: skip
         mask = mask.to(self.weight.device) & (self.count > 0)
         where = mask.nonzero()
         if where.shape[0] > 0:

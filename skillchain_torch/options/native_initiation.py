@@ -6,7 +6,14 @@ on (the skill-chaining agent turns it on with its own compiled kernels, on CPU f
 * :func:`contains`: every slot's membership of one state per agent, each slot one pass (the
   logit, then for constrained slots the stored positives until one is within reach);
 * :func:`logistic_sweeps`: :func:`~skillchain_torch.options.logistic.logistic_sweeps` with the
-  sweeps in one call instead of five tensor operations each.
+  sweeps in one call instead of five tensor operations each;
+* :func:`fit`: the classifier's whole fit of the slots in a mask (features, the terms of
+  :func:`~skillchain_torch.options.logistic.sweep_terms`, the sweeps), one pass per slot on its
+  stored examples, in place: the numbers of :func:`logistic_sweeps`, bit for bit;
+* :func:`store`: :meth:`~skillchain_torch.options.InitiationClassifier.add_examples`'s stores,
+  one example after the other, placed as :func:`~skillchain_torch.options.examples.store_places`
+  places them (the same reservoir draws), bit for bit; :func:`store_executions` stores the
+  examples of ended executions straight from their trace.
 
 Their sums run in a fixed order of their own, so they agree with the torch path to rounding,
 not bit for bit (a membership differs only for a state within rounding of a boundary). Each
@@ -29,6 +36,7 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.features import PolynomialFeatures
+from skillchain_torch.options.examples import RESERVOIR_STREAM
 from skillchain_torch.options.logistic import sweep_terms
 
 try:
@@ -36,7 +44,7 @@ try:
 except ImportError:  # built without a C compiler: the classifier keeps its torch path
     _c = None
 
-__all__ = ["AVAILABLE", "contains", "logistic_sweeps"]
+__all__ = ["AVAILABLE", "contains", "fit", "logistic_sweeps", "store", "store_executions"]
 
 AVAILABLE = _c is not None
 OBS_DIM = 4
@@ -72,3 +80,51 @@ def logistic_sweeps(x: Tensor, labels: Tensor, stored: Tensor, params: Tensor, l
     _c.sweeps(M, L, F1, x.data_ptr(), step.data_ptr(), minus_step_y.data_ptr(), v.data_ptr(),
               int(sweeps))  # fmt: skip
     return -v
+
+
+def fit(features: PolynomialFeatures, centered: bool, mask: Tensor, examples: Tensor,
+        labels: Tensor, count: Tensor, weight: Tensor, bias: Tensor, lr: float, sweeps: int,
+        balanced: bool, sweeps_done: Tensor, trained: Tensor, dirty: Tensor) -> Tensor:
+    """``sweeps`` gradient steps for every slot in ``mask [P, K]`` (bool) holding data, on its
+    stored examples, writing ``weight [P, K, F]`` and ``bias [P, K]`` in place and updating the
+    slots' ``sweeps_done``, ``trained`` and ``dirty``; the other arguments are the classifier's
+    stores as they are (contiguous CPU). Returns the ``[P, K]`` mask of slots fitted."""
+    P, K, F = weight.shape
+    factors, mask = features.factor_index, mask.contiguous()
+    fitted = torch.empty(P, K, dtype=torch.bool)
+    _c.fit(P, K, examples.shape[2], F, factors.data_ptr(), factors.shape[1], centered,
+           mask.data_ptr(), examples.data_ptr(), labels.data_ptr(), count.data_ptr(),
+           weight.data_ptr(), bias.data_ptr(), float(lr), int(sweeps), balanced,
+           sweeps_done.data_ptr(), trained.data_ptr(), dirty.data_ptr(),
+           fitted.data_ptr())  # fmt: skip
+    return fitted
+
+
+def _stores(classifier, touched: Tensor) -> tuple:
+    """The classifier's store arguments of the C ``store`` functions, in their order."""
+    return (classifier.seeds.data_ptr(), classifier.generation.data_ptr(), RESERVOIR_STREAM,
+            classifier.replacement == "ring", classifier.seen.data_ptr(),
+            classifier.examples.data_ptr(), classifier.labels.data_ptr(),
+            classifier.count.data_ptr(), touched.data_ptr())  # fmt: skip
+
+
+def store(classifier, agents: Tensor, slots: Tensor, obs: Tensor, labels: Tensor,
+          touched: Tensor) -> bool:  # fmt: skip
+    """Store examples ``obs [N, 4]`` (float64) with ``labels [N]`` (bool) for
+    ``(agents, slots)`` (int64 ``[N]``) in ``classifier``'s stores, in order, marking
+    ``touched [P, K]`` (bool). False (nothing written) if an index is out of range."""
+    P, K, C = classifier.labels.shape
+    status = _c.store(P, K, C, agents.shape[0], agents.data_ptr(), slots.data_ptr(),
+                      obs.data_ptr(), labels.data_ptr(), *_stores(classifier, touched))
+    return status == 0
+
+
+def store_executions(classifier, states: Tensor, slot: Tensor, duration: Tensor,
+                     success: Tensor, failure: Tensor, touched: Tensor) -> int:  # fmt: skip
+    """The examples of ended executions (see ``ExecutionTrace.examples``: the first
+    ``duration`` states ``[P, T, 4]`` of a success, the first of a failure) stored in slot
+    ``slot [P]`` of each agent, marking ``touched [P, K]``; the number of examples."""
+    P, K, C = classifier.labels.shape
+    return _c.store_executions(P, K, C, states.shape[1], states.data_ptr(), slot.data_ptr(),
+                               duration.data_ptr(), success.data_ptr(), failure.data_ptr(),
+                               *_stores(classifier, touched))  # fmt: skip

@@ -96,3 +96,49 @@ def test_after_transition_equals_torch(monkeypatch):
     assert bool(results[0][0].any())  # options were created
     assert not torch.equal(results[0][1], torch.randn(P, K, dtype=torch.float64,
                                                       generator=torch.Generator().manual_seed(6)))
+
+
+@needs_native
+def test_triggers_report_only_events_on_the_list():
+    """A base event firing after its branching limit is not on the list: nothing can be
+    created, so the step skips creation; the same event with room left is reported."""
+    P, K = 2, 4
+    bank = OptionBank.build(P, K, order=1, capacity=8)
+    bank.status[0, :3] = int(OptionStatus.LEARNING)  # agent 0: three options target the goal
+    bank.target_event[0, :3] = 0
+    zeros, goal = torch.zeros(P, 1, dtype=torch.bool), torch.ones(P, 1, dtype=torch.bool)
+    no = torch.zeros(P, K, dtype=torch.bool)
+    for stepped, expected in (([True, False], False), ([True, True], True)):
+        *_, any_listed = native_discovery.triggers(
+            bank.parent, bank.target_event, bank.status, zeros, goal, no, no, no,
+            torch.tensor(stepped), torch.zeros(P, dtype=torch.float64),
+            torch.zeros(P, K, dtype=torch.float64), max_branching=3)  # fmt: skip
+        assert any_listed is expected
+
+
+@needs_native
+@pytest.mark.parametrize("replacement", ["reservoir", "ring"])
+def test_store_examples_compiled_equals_torch(replacement):
+    """Examples of ended executions go straight from the trace into the compiled stores: the
+    same stores as ExecutionTrace.examples + add_examples (capacity 6 overflows)."""
+    P, K, T = 5, 3, 8
+    g = torch.Generator().manual_seed(3)
+    banks = [OptionBank.build(P, K, order=1, capacity=6, replacement=replacement)
+             for _ in range(2)]  # fmt: skip
+    banks[0].classifier.set_native(True)
+    traces = [ExecutionTrace(P, T, bank.q_head) for bank in banks]
+    for _ in range(6):
+        states = torch.rand(P, T, 4, dtype=torch.float64, generator=g)
+        slot = torch.randint(0, K, (P,), generator=g)
+        duration = torch.randint(1, T + 3, (P,), generator=g)
+        success = torch.rand(P, generator=g) < 0.4
+        failure = ~success & (torch.rand(P, generator=g) < 0.5)
+        touched = []
+        for bank, trace in zip(banks, traces):
+            trace.states = states.clone()
+            touched.append(trace.store_examples(bank.classifier, slot, duration, success,
+                                                failure))  # fmt: skip
+        assert torch.equal(*touched)
+        for name in ("examples", "labels", "count", "seen", "dirty"):
+            assert torch.equal(*(getattr(b.classifier, name) for b in banks)), name
+    assert int(banks[0].classifier.seen.max()) > 6

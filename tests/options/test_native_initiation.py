@@ -5,6 +5,7 @@ bits, so on random states the two agree exactly. Fits agree to rounding.
 """
 
 import doctest
+import functools
 
 import pytest
 import torch
@@ -111,3 +112,59 @@ def test_leaving_the_cpu_or_float64_turns_it_off():
     clf.to(torch.float32)
     assert clf.native is False
     clf.contains(torch.rand(1, 4))  # the torch path answers
+
+
+
+@needs_native
+@pytest.mark.parametrize("replacement", ["reservoir", "ring"])
+@pytest.mark.parametrize("centered", [False, True])
+@pytest.mark.parametrize("balanced", [False, True])
+def test_compiled_stores_and_fits_equal_the_compiled_sweeps_bit_for_bit(replacement, centered,
+                                                                       balanced):
+    """add_examples and fit in one compiled pass each give the torch path's stores
+    (store_places, the reservoir's draws included: batches overflow the capacity of 16) and,
+    around the same compiled sweeps, its weights and bookkeeping, bit for bit."""
+    kwargs = dict(capacity=16, seed=7, replacement=replacement, centered=centered,
+                  balanced=balanced)  # fmt: skip
+    split = InitiationClassifier(3, 4, **kwargs)  # torch stores and fit, compiled sweeps
+    split._fit_slots = functools.partial(_compiled_sweeps, split)
+    fused = InitiationClassifier(3, 4, **kwargs)
+    fused.set_native(True)
+    g = gen(4)
+    for _ in range(12):
+        n = int(torch.randint(1, 30, (1,), generator=g))
+        agents = torch.randint(0, 3, (n,), generator=g)
+        slots = torch.randint(0, 4, (n,), generator=g)
+        x = torch.rand(n, 4, dtype=F64, generator=g)
+        labels = x[:, 2] > 0.4
+        assert torch.equal(fused.add_examples(agents, slots, x, labels),
+                           split.add_examples(agents, slots, x, labels))  # fmt: skip
+        for name in ("examples", "labels", "count", "seen", "dirty"):
+            assert torch.equal(getattr(fused, name), getattr(split, name)), name
+        mask = torch.rand(3, 4, generator=g) < 0.7
+        assert torch.equal(fused.fit(mask), split.fit(mask))
+        for name in ("weight", "bias", "sweeps_done", "trained", "dirty"):
+            assert torch.equal(getattr(fused, name), getattr(split, name)), name
+    assert int(fused.seen.max()) > 16  # the reservoir (or ring) replaced examples
+    assert fused.sweeps_done.unique().numel() > 1  # the masks left some slots out
+
+
+def _compiled_sweeps(clf, pi, ki, length):
+    """InitiationClassifier._fit_slots with the compiled sweeps."""
+    params = native_initiation.logistic_sweeps(
+        clf.phi(clf.examples[pi, ki, :length]), clf.labels[pi, ki, :length],
+        torch.arange(length) < clf.count[pi, ki][:, None],
+        torch.cat([clf.weight[pi, ki], clf.bias[pi, ki, None]], dim=-1), clf.lr, clf.sweeps,
+        clf.balanced)  # fmt: skip
+    clf.weight[pi, ki] = params[:, :-1]
+    clf.bias[pi, ki] = params[:, -1]
+
+
+@needs_native
+def test_compiled_store_rejects_bad_indices_and_writes_nothing():
+    clf = InitiationClassifier(2, 3, capacity=8)
+    clf.set_native(True)
+    x = torch.rand(2, 4, dtype=F64)
+    with pytest.raises(ValueError, match="out of range for P=2, K=3"):
+        clf.add_examples(torch.tensor([0, 2]), torch.tensor([1, 1]), x, torch.ones(2, dtype=bool))
+    assert int(clf.seen.sum()) == 0 and not bool(clf.dirty.any())
