@@ -20,7 +20,7 @@ bits of trajectories.
 
 from setuptools import Extension, setup
 
-FLAGS = ["-O3", "-ffp-contract=off", "-fno-fast-math"]
+FLAGS = ["-O3", "-ffp-contract=off", "-fno-fast-math", "-fno-trapping-math"]
 SHARED = dict(include_dirs=["skillchain_torch"], depends=["skillchain_torch/native_maths.h"],
               extra_compile_args=FLAGS, optional=True)
 

@@ -9,6 +9,8 @@
  * decision: u0 < epsilon explores among the available decisions, otherwise the available
  * maximisers of q are the candidates; u1 picks the floor(u1 * count)-th of them.
  *
+ * exp_lane: the logistic sweeps' exponential (within 1 ulp of libm's; its own bits).
+ *
  * Compiled with -ffp-contract=off: no fused multiply-adds.
  */
 #ifndef SKILLCHAIN_NATIVE_MATHS_H
@@ -16,13 +18,16 @@
 
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 /* NATIVE_CLONES on a kernel's entry point: GCC builds it twice, for AVX2 and for any x86-64,
  * and picks one when the module loads. The helpers it inlines come along, so the dot products
  * run four lanes wide where the CPU has them. The bits stay the same: each of dot's eight
  * partial sums keeps its own order in any lane, and no multiply-add is fused (AVX2 alone
- * brings no FMA, and -ffp-contract=off). */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+ * brings no FMA, and -ffp-contract=off). -DSKILLCHAIN_NO_CLONES builds the plain x86-64 code only
+ * (tests/test_native_clones.py compares the two). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) \
+    && !defined(SKILLCHAIN_NO_CLONES)
 #define NATIVE_CLONES __attribute__((target_clones("avx2", "default")))
 #else
 #define NATIVE_CLONES
@@ -45,6 +50,50 @@ static inline double dot(const double *a, const double *b, long n)
     double tail = 0.0;
     for (; f < n; f++) tail += a[f] * b[f];
     return (((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7))) + tail;
+}
+
+/* exp(x) within 1 ulp of libm's, in operations a compiler can run four lanes wide (libm's
+ * exp is a call per value: it was ~60% of a logistic sweep). Cody-Waite reduction
+ * x = k ln2 + r (|r| <= ln2 / 2, k from the round-to-nearest trick of adding 1.5 * 2^52), a
+ * degree-13 Taylor polynomial for exp(r) by Horner's rule, then 2^k in two halves so that
+ * results near overflow and subnormal ones scale without an intermediate overflow. Only
+ * IEEE additions, multiplications and integer shifts: every lane and the scalar code give the
+ * same bits. exp(NaN) = NaN, exp(x > 709.8) = inf, exp(x < -745.2) = 0, as libm. */
+static inline double exp_lane(double x)
+{
+    const double shifter = 0x1.8p52, log2e = 0x1.71547652b82fep0;
+    const double ln2_hi = 0x1.62e42fefa3800p-1, ln2_lo = 0x1.ef35793c76730p-45;
+    double xc = x > 709.8 ? 709.8 : (x < -745.2 ? -745.2 : x);
+    double t = xc * log2e + shifter; /* k in the low bits of t */
+    double k = t - shifter;
+    double r = (xc - k * ln2_hi) - k * ln2_lo; /* k * ln2_hi is exact */
+    double p = 1.0 / 6227020800.0;
+    p = p * r + 1.0 / 479001600.0;
+    p = p * r + 1.0 / 39916800.0;
+    p = p * r + 1.0 / 3628800.0;
+    p = p * r + 1.0 / 362880.0;
+    p = p * r + 1.0 / 40320.0;
+    p = p * r + 1.0 / 5040.0;
+    p = p * r + 1.0 / 720.0;
+    p = p * r + 1.0 / 120.0;
+    p = p * r + 1.0 / 24.0;
+    p = p * r + 1.0 / 6.0;
+    p = p * r + 0.5;
+    p = p * r + 1.0;
+    p = p * r + 1.0;
+    int64_t t_bits, k_int, half, b1, b2;
+    memcpy(&t_bits, &t, sizeof t_bits);
+    k_int = t_bits - 0x18000000000000LL;
+    half = k_int >> 1;
+    b1 = (half + 1023) << 52;
+    b2 = (k_int - half + 1023) << 52;
+    double s1, s2;
+    memcpy(&s1, &b1, sizeof s1);
+    memcpy(&s2, &b2, sizeof s2);
+    double y = (p * s1) * s2;
+    y = x > 709.8 ? INFINITY : y;
+    y = x < -745.2 ? 0.0 : y;
+    return x != x ? x : y;
 }
 
 /* Largest of q[d] over the d with ok[d] (all when ok is 0); NaN if any of them is NaN (as

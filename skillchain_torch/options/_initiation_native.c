@@ -1,17 +1,22 @@
-/* The initiation classifier's two costly pieces, compiled (see native_initiation.py).
+/* The initiation classifier's costly pieces, compiled (see native_initiation.py).
  *
  * Why it exists: a skill-chaining step asks every slot of every agent whether it holds the new
  * state (a 15-feature logit, then for learned options a distance test against up to C stored
- * positives), and each finished execution refits its slot with 100 gradient sweeps. In torch
- * the first is a dozen small operations and a [P, K, C] distance matrix per step, the second
- * five operations per sweep (500 per fit); at P = 100 they took ~3 ms of a ~11 ms step. Here
- * each slot is one pass, and the distance test stops at the first positive within reach.
+ * positives), and each finished execution stores its examples and refits its slot with 100
+ * gradient sweeps. In torch the first is a dozen small operations and a [P, K, C] distance
+ * matrix per step, the last five operations per sweep (500 per fit) plus the sorts and hashes
+ * of the stores; at P = 100 they took ~3 ms of a ~11 ms step. Here each slot is one pass, the
+ * distance test stops at the first positive within reach, and a fit or a batch of examples is
+ * one call.
  *
  * Arithmetic: native_maths.h's dot (its own fixed order: not torch's bits, the same for a
  * slot whatever the batch); the sweep keeps logistic_sweeps's expressions
  * (g = -step y + step / (1 + exp(x . v)), v += sum_l x_l g_l, summed over the examples in
- * order); distances are compared squared (a membership can differ from torch's cdist only
- * for a state within rounding of the radius). Compiled with -ffp-contract=off.
+ * order) with native_maths.h's exp_lane (within 1 ulp of libm's exp), four examples or
+ * features at a time where the compiler has vector types, lane for lane the plain loops'
+ * operations; distances are compared squared (a membership can differ from torch's cdist only
+ * for a state within rounding of the radius). The stores (store, store_executions) copy and
+ * hash integers: the torch path's bits. Compiled with -ffp-contract=off.
  *
  * Every array argument is an address (torch.Tensor.data_ptr()) of a contiguous CPU tensor;
  * flags are uint8 (torch.bool).
@@ -20,6 +25,7 @@
 #include <Python.h>
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "native_maths.h"
 
@@ -105,24 +111,125 @@ NATIVE_CLONES static PyObject *contains(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* The two sums of a sweep over L examples of F1 features, written so that a compiler runs
+ * them four lanes wide, each lane doing what the plain loops below do (so the same bits):
+ * z_l = dot(x_l, v) for every l, from the examples transposed (xt [F1, L]: four examples'
+ * feature f side by side), and dv_f = sum_l x_l[f] g_l in the order of l (x [L, F1]: the
+ * four features of a lane side by side). */
+#if defined(__GNUC__)
+typedef double lanes4 __attribute__((vector_size(32)));
+#define LOAD4(dst, src) memcpy(&(dst), (src), sizeof(lanes4))
+#define STORE4(dst, src) memcpy((dst), &(src), sizeof(lanes4))
+
+NATIVE_CLONES static void example_dots(const double *xt, const double *v, Py_ssize_t L, Py_ssize_t F1,
+                         double *z)
+{
+    Py_ssize_t l = 0;
+    for (; l + 4 <= L; l += 4) { /* native_maths.h's dot, four examples at a time */
+        lanes4 s[8] = {{0.0}}, tail = {0.0}, column;
+        Py_ssize_t f = 0;
+        for (; f + 8 <= F1; f += 8)
+            for (int j = 0; j < 8; j++) {
+                LOAD4(column, xt + (f + j) * L + l);
+                s[j] += column * v[f + j];
+            }
+        for (; f < F1; f++) {
+            LOAD4(column, xt + f * L + l);
+            tail += column * v[f];
+        }
+        lanes4 r = (((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]))) + tail;
+        STORE4(z + l, r);
+    }
+    for (; l < L; l++) { /* the last few, one at a time */
+        double s[8] = {0.0}, tail = 0.0;
+        Py_ssize_t f = 0;
+        for (; f + 8 <= F1; f += 8)
+            for (int j = 0; j < 8; j++) s[j] += xt[(f + j) * L + l] * v[f + j];
+        for (; f < F1; f++) tail += xt[f * L + l] * v[f];
+        z[l] = (((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]))) + tail;
+    }
+}
+
+NATIVE_CLONES static void feature_sums(const double *x, const double *g, Py_ssize_t L, Py_ssize_t F1,
+                         double *dv)
+{
+    Py_ssize_t f = 0;
+    for (; f + 16 <= F1; f += 16) { /* four independent chains of additions */
+        lanes4 a0 = {0.0}, a1 = {0.0}, a2 = {0.0}, a3 = {0.0}, r0, r1, r2, r3;
+        for (Py_ssize_t l = 0; l < L; l++) {
+            const double *row = x + l * F1 + f;
+            LOAD4(r0, row);
+            LOAD4(r1, row + 4);
+            LOAD4(r2, row + 8);
+            LOAD4(r3, row + 12);
+            a0 += r0 * g[l];
+            a1 += r1 * g[l];
+            a2 += r2 * g[l];
+            a3 += r3 * g[l];
+        }
+        STORE4(dv + f, a0);
+        STORE4(dv + f + 4, a1);
+        STORE4(dv + f + 8, a2);
+        STORE4(dv + f + 12, a3);
+    }
+    for (; f + 4 <= F1; f += 4) {
+        lanes4 a = {0.0}, r;
+        for (Py_ssize_t l = 0; l < L; l++) {
+            LOAD4(r, x + l * F1 + f);
+            a += r * g[l];
+        }
+        STORE4(dv + f, a);
+    }
+    for (; f < F1; f++) {
+        double a = 0.0;
+        for (Py_ssize_t l = 0; l < L; l++) a += x[l * F1 + f] * g[l];
+        dv[f] = a;
+    }
+}
+#else
+NATIVE_CLONES static void example_dots(const double *xt, const double *v, Py_ssize_t L, Py_ssize_t F1,
+                         double *z)
+{
+    for (Py_ssize_t l = 0; l < L; l++) {
+        double s[8] = {0.0}, tail = 0.0;
+        Py_ssize_t f = 0;
+        for (; f + 8 <= F1; f += 8)
+            for (int j = 0; j < 8; j++) s[j] += xt[(f + j) * L + l] * v[f + j];
+        for (; f < F1; f++) tail += xt[f * L + l] * v[f];
+        z[l] = (((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]))) + tail;
+    }
+}
+
+NATIVE_CLONES static void feature_sums(const double *x, const double *g, Py_ssize_t L, Py_ssize_t F1,
+                         double *dv)
+{
+    for (Py_ssize_t f = 0; f < F1; f++) {
+        double a = 0.0;
+        for (Py_ssize_t l = 0; l < L; l++) a += x[l * F1 + f] * g[l];
+        dv[f] = a;
+    }
+}
+#endif
+
+/* Doubles of scratch sweep_slot needs. */
+static size_t sweep_work(Py_ssize_t L, Py_ssize_t F1) { return (size_t)(L * F1 + 2 * L + F1 + 1); }
+
 /* n_sweeps gradient steps of one slot over its first L examples (x [L, F1], the last feature
  * the constant 1; v [F1], the negated parameters, in place): z_l = x_l . v,
- * g_l = minus_step_y_l + step_l / (exp(z_l) + 1), v += sum_l x_l g_l. Places with step 0
- * (empty) add exactly nothing and are skipped. Each sweep first finds every g_l (independent
- * given v, so the exps overlap), then sums in the order of l. dv: scratch [F1], g: [L]. */
+ * g_l = minus_step_y_l + step_l / (exp(z_l) + 1) (0 for empty places, step 0), then
+ * v += sum_l x_l g_l, summed in the order of l. work: sweep_work(L, F1) doubles. */
 NATIVE_CLONES static void sweep_slot(const double *x, const double *step, const double *msy,
                                      double *v, Py_ssize_t L, Py_ssize_t F1, Py_ssize_t n_sweeps,
-                                     double *dv, double *g)
+                                     double *work)
 {
+    double *xt = work, *z = xt + L * F1, *g = z + L, *dv = g + L;
+    for (Py_ssize_t l = 0; l < L; l++)
+        for (Py_ssize_t f = 0; f < F1; f++) xt[f * L + l] = x[l * F1 + f];
     for (Py_ssize_t it = 0; it < n_sweeps; it++) {
+        example_dots(xt, v, L, F1, z);
         for (Py_ssize_t l = 0; l < L; l++)
-            g[l] = step[l] == 0.0 ? 0.0 : msy[l] + step[l] / (exp(dot(x + l * F1, v, F1)) + 1.0);
-        for (Py_ssize_t f = 0; f < F1; f++) dv[f] = 0.0;
-        for (Py_ssize_t l = 0; l < L; l++) {
-            if (step[l] == 0.0) continue;
-            const double *xl = x + l * F1;
-            for (Py_ssize_t f = 0; f < F1; f++) dv[f] += xl[f] * g[l];
-        }
+            g[l] = step[l] == 0.0 ? 0.0 : msy[l] + step[l] / (exp_lane(z[l]) + 1.0);
+        feature_sums(x, g, L, F1, dv);
         for (Py_ssize_t f = 0; f < F1; f++) v[f] += dv[f];
     }
 }
@@ -139,12 +246,12 @@ static PyObject *sweeps(PyObject *self, PyObject *args)
     const double *x = (const double *)(uintptr_t)x_p, *step = (const double *)(uintptr_t)step_p;
     const double *msy = (const double *)(uintptr_t)msy_p;
     double *v = (double *)(uintptr_t)v_p;
-    double *dv = (double *)malloc(sizeof(double) * (size_t)(F1 + L + 1));
-    if (!dv) return PyErr_NoMemory();
+    double *work = (double *)malloc(sizeof(double) * sweep_work(L, F1));
+    if (!work) return PyErr_NoMemory();
     for (Py_ssize_t m = 0; m < M; m++)
-        sweep_slot(x + m * L * F1, step + m * L, msy + m * L, v + m * F1, L, F1, n_sweeps, dv,
-                   dv + F1);
-    free(dv);
+        sweep_slot(x + m * L * F1, step + m * L, msy + m * L, v + m * F1, L, F1, n_sweeps,
+                   work);
+    free(work);
     Py_RETURN_NONE;
 }
 
@@ -176,9 +283,9 @@ static PyObject *fit(PyObject *self, PyObject *args)
     const int64_t *count = (const int64_t *)(uintptr_t)cnt_p;
     double *weight = (double *)(uintptr_t)w_p, *bias = (double *)(uintptr_t)b_p;
     Py_ssize_t F1 = F + 1;
-    double *x = (double *)malloc(sizeof(double) * (size_t)(C * F1 + 3 * C + 2 * F1 + 1));
+    double *x = (double *)malloc(sizeof(double) * (C * F1 + 2 * C + F1 + sweep_work(C, F1)));
     if (!x) return PyErr_NoMemory();
-    double *step = x + C * F1, *msy = step + C, *g = msy + C, *v = g + C, *dv = v + F1;
+    double *step = x + C * F1, *msy = step + C, *v = msy + C, *work = v + F1;
     for (Py_ssize_t s = 0; s < P * K; s++) {
         Py_ssize_t L = (Py_ssize_t)count[s];
         fitted[s] = mask[s] && L > 0;
@@ -205,7 +312,7 @@ static PyObject *fit(PyObject *self, PyObject *args)
         double *w = weight + s * F;
         for (Py_ssize_t f = 0; f < F; f++) v[f] = -w[f];
         v[F] = -bias[s];
-        sweep_slot(x, step, msy, v, L, F1, n_sweeps, dv, g);
+        sweep_slot(x, step, msy, v, L, F1, n_sweeps, work);
         for (Py_ssize_t f = 0; f < F; f++) w[f] = -v[f];
         bias[s] = -v[F];
     }
@@ -343,9 +450,23 @@ static PyObject *store_executions(PyObject *self, PyObject *args)
     return PyLong_FromLong(stored);
 }
 
+/* exp(n, x, out): out[i] = exp_lane(x[i]), the sweeps' exponential (exposed so that its
+ * accuracy against libm can be checked). */
+NATIVE_CLONES static PyObject *exp_(PyObject *self, PyObject *args)
+{
+    Py_ssize_t n;
+    unsigned long long x_p, out_p;
+    if (!PyArg_ParseTuple(args, "nKK", &n, &x_p, &out_p)) return NULL;
+    const double *x = (const double *)(uintptr_t)x_p;
+    double *out = (double *)(uintptr_t)out_p;
+    for (Py_ssize_t i = 0; i < n; i++) out[i] = exp_lane(x[i]);
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"contains", contains, METH_VARARGS, "Initiation-set memberships of one state per agent."},
     {"sweeps", sweeps, METH_VARARGS, "Logistic-regression gradient sweeps of some slots."},
+    {"exp", exp_, METH_VARARGS, "The sweeps' exponential of an array (exp_lane)."},
     {"fit", fit, METH_VARARGS, "A classifier's fits of the slots in a mask, in place."},
     {"store", store, METH_VARARGS, "A classifier's example stores, one example at a time."},
     {"store_executions", store_executions, METH_VARARGS,

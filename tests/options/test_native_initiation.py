@@ -168,3 +168,25 @@ def test_compiled_store_rejects_bad_indices_and_writes_nothing():
     with pytest.raises(ValueError, match="out of range for P=2, K=3"):
         clf.add_examples(torch.tensor([0, 2]), torch.tensor([1, 1]), x, torch.ones(2, dtype=bool))
     assert int(clf.seen.sum()) == 0 and not bool(clf.dirty.any())
+
+
+@needs_native
+def test_sweeps_exponential_is_within_one_ulp_of_libm():
+    """exp_lane (the sweeps' exponential, native_maths.h): within 1 ulp of math.exp over the
+    whole range, and libm's answers at the edges (overflow, subnormals, zero, inf, NaN)."""
+    import math
+
+    g = gen(8)
+    x = torch.cat([(torch.rand(200_000, dtype=F64, generator=g) * 2 - 1) * scale
+                   for scale in (1e-6, 1.0, 30.0, 709.0)])  # fmt: skip
+    got = native_initiation.exp(x)
+    expected = torch.tensor([math.exp(v) for v in x.tolist()], dtype=F64)
+    ulp = torch.nextafter(expected, torch.tensor(math.inf, dtype=F64)) - expected
+    error = ((got - expected).abs() / ulp)[expected > 0]
+    assert float(error.max()) <= 1.0
+    assert 0.0 < float((got != expected).double().mean()) < 0.2  # its own bits, mostly libm's
+    edges = [0.0, -0.0, 1e-300, 709.78, 709.79, -708.4, -740.0, -745.1, -745.2, -746.0,
+             math.inf, -math.inf]  # fmt: skip
+    assert native_initiation.exp(torch.tensor(edges, dtype=F64)).tolist() == \
+        [math.exp(v) if v < 709.79 else math.inf for v in edges]
+    assert math.isnan(float(native_initiation.exp(torch.tensor([math.nan], dtype=F64))[0]))
