@@ -159,9 +159,11 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  * HierarchicalAgent.transition for every row, given what needs torch or Python at s'
  * (memberships, targets, features, uniforms [P, 4]): the intra-option updates, the decision's
  * return and duration, the end of executions, the top-level choice at s', the SMDP update, the
- * new state and the next primitive action, in the torch path's order. The state at s is read
- * only; the state at s' goes to the out_ arrays (fresh, as the torch path replaces its state
- * tensors). Rows outside `stepped` keep their state. `status` [P, K]: live slots are != 0,
+ * new state and the next primitive action, in the torch path's order. The state at s' goes to
+ * the out_ arrays. out_code and out_phi may be code and phi themselves (the agent keeps these
+ * two large arrays and updates them in place: each row is read before it is written, and the
+ * decision's features are copied only for new decisions); the other out_ arrays must be
+ * fresh. Rows outside `stepped` keep their state. `status` [P, K]: live slots are != 0,
  * available ones >= executable_from (and contain s'). q [P, D]: the values the decision at s'
  * was taken with (rows whose decision ended; 0 elsewhere); `started`: rows starting an option.
  * A counts both the primitive decisions and the option heads' actions. The option heads' code
@@ -212,10 +214,12 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
     int64_t *out_duration = I64(o_dur), *d_next = I64(dn_p), *info_duration = I64(id_p);
     uint8_t *out_contains = U8(o_con), *decision_ended = U8(de_p), *started = U8(started_p);
     uint8_t ok[MAX_CHOICES];
+    double *code_next = (double *)malloc(sizeof(double) * (size_t)(Fo > 0 ? Fo : 1));
+    if (!code_next) return PyErr_NoMemory();
 
     for (Py_ssize_t p = 0; p < P; p++) {
         int go = stepped[p], term = go && terminated[p], ended = term || (go && truncated[p]);
-        double *code_next = out_code + p * Fo;  /* the code of s' (kept only if stepped) */
+        /* code_next: the code of s' (kept only if stepped), written to out_code last */
         if (next_code) {
             for (Py_ssize_t f = 0; f < Fo; f++) code_next[f] = next_code[p * Fo + f];
         } else {
@@ -264,16 +268,15 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         /* The state at s'. */
         const double *s_obs = go ? next_obs + p * 4 : obs + p * 4;
         for (int j = 0; j < 4; j++) out_obs[p * 4 + j] = s_obs[j];
-        if (!go)
-            for (Py_ssize_t f = 0; f < Fo; f++) code_next[f] = x[f];
-        const double *c_new = code_next;
+        const double *c_new = go ? code_next : x;
         for (Py_ssize_t k = 0; k < K; k++)
             out_contains[p * K + k] = go ? in_next[k] : contains[p * K + k];
         int fresh = dec_end && !ended;
         int64_t dec = fresh ? dn : decision[p];
         int64_t opt = ended ? -1 : fresh ? (dn >= A ? dn - A : -1) : option[p];
         const double *phi_new = fresh ? phi_next + p * F : phi + p * F;
-        for (Py_ssize_t f = 0; f < F; f++) out_phi[p * F + f] = phi_new[f];
+        if (out_phi + p * F != phi_new)
+            for (Py_ssize_t f = 0; f < F; f++) out_phi[p * F + f] = phi_new[f];
         out_ret[p] = fresh ? 0.0 : R;
         out_duration[p] = fresh ? 0 : k_steps;
         out_decision[p] = dec;
@@ -286,7 +289,10 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
             value[p] = !go      ? 0.0
                        : dec_end ? qp[dec]
                                  : dot(w + (p * D + dec) * F, phi_next + p * F, F);
+        if (out_code + p * Fo != c_new)
+            for (Py_ssize_t f = 0; f < Fo; f++) out_code[p * Fo + f] = c_new[f];
     }
+    free(code_next);
     Py_RETURN_NONE;
 }
 

@@ -392,6 +392,8 @@ class HierarchicalAgent(nn.Module):
 
     # ------------------------------------------------------------------ protocol
     def _full(self, rows_value: Tensor, fill: Tensor) -> Tensor:
+        if self._index.numel() == self.population:  # every agent active: rows are agents
+            return rows_value if rows_value.dtype == fill.dtype else rows_value.to(fill.dtype)
         out = fill.clone()
         out[self._index] = rows_value if rows_value.dtype == out.dtype else rows_value.to(out.dtype)
         return out
@@ -445,6 +447,8 @@ class HierarchicalAgent(nn.Module):
     @property
     def actions(self) -> Tensor:
         """The primitive action of each active row ``[n]``."""
+        if self._index.numel() == self.population:  # (action is replaced, never written)
+            return self.action
         return self.action[self._index]
 
     @property

@@ -110,12 +110,22 @@ _OUT = ("q", "d_next", "decision_ended", "option_delta", "smdp_delta", "info_dur
         "info_return", "started")
 
 
+def _own(agent, name: str) -> Tensor:
+    """The agent's float64 state array ``name``, contiguous (made so once if it is not)."""
+    x = getattr(agent, name)
+    if not x.is_contiguous() or x.dtype != torch.float64:
+        x = x.to(torch.float64).contiguous()
+        setattr(agent, name, x)
+    return x
+
+
 def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
                stepped: Tensor, contains_next: Tensor, reached: Tensor,
                uniforms: Tensor) -> dict[str, Tensor]:  # fmt: skip
     """The rest of ``agent.transition`` after the memberships, targets and uniforms
     (``[P, 4]``) of ``s'``: its features, then every row in one C pass (weights updated in
-    place, the state at ``s'`` in fresh tensors). Returns the transition's monitoring dict.
+    place, the state at ``s'`` in fresh tensors but for ``option_code`` and ``decision_phi``,
+    updated in place). Returns the transition's monitoring dict.
 
     ``next_obs`` holds ``s`` on rows not stepped; ``terminated``/``truncated`` are masked to
     ``stepped``; ``reward`` is float64.
@@ -129,9 +139,11 @@ def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, trun
     next_code = bank.q_head.encode(next_obs) if columns is None else None
     reward, reached = reward.contiguous(), reached.contiguous()
     f64, i64, b = dict(dtype=torch.float64), dict(dtype=torch.int64), dict(dtype=torch.bool)
+    # The two large state arrays are updated in place (see the C step); they are the agent's
+    # own (every other writer replaces them), so nothing else sees the change.
     out = {
-        "obs": torch.empty(P, 4, **f64), "option_code": torch.empty(P, Fo, **f64),
-        "contains": torch.empty(P, K, **b), "decision_phi": torch.empty(P, F, **f64),
+        "obs": torch.empty(P, 4, **f64), "option_code": _own(agent, "option_code"),
+        "contains": torch.empty(P, K, **b), "decision_phi": _own(agent, "decision_phi"),
         "decision": torch.empty(P, **i64), "option": torch.empty(P, **i64),
         "action": torch.empty(P, **i64), "decision_return": torch.empty(P, **f64),
         "duration": torch.empty(P, **i64), "q": torch.empty(P, D, **f64),

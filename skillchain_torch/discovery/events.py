@@ -77,6 +77,9 @@ def evaluate_base_events(events: Sequence[TerminationPredicate], obs: Tensor,
     """``BoolTensor [P, E]``: every base event's indicator at ``obs [P, 4]``."""
     if not events:
         return torch.zeros(obs.shape[0], 0, dtype=torch.bool, device=obs.device)
+    if len(events) == 1:  # the paper's goal alone, every step: a view, not a stack
+        fired = events[0](obs, terminated)
+        return (fired if fired.device == obs.device else fired.to(obs.device)).unsqueeze(-1)
     return torch.stack([e(obs, terminated).to(obs.device) for e in events], dim=-1)
 
 

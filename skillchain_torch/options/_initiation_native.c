@@ -31,18 +31,42 @@
 
 #define OBS_DIM 4
 
+#if defined(__GNUC__)
+typedef double lanes4 __attribute__((vector_size(32)));
+typedef long long mask4 __attribute__((vector_size(32)));
+#define LOAD4(dst, src) memcpy(&(dst), (src), sizeof(lanes4))
+#define STORE4(dst, src) memcpy((dst), &(src), sizeof(lanes4))
+#endif
+
 /* Within `distance` of one of the first `count` stored examples labelled positive, in the
- * dims flagged (squared distances against distance^2: no square root per example). */
-static int near_positive(const double *point, const double *examples, const uint8_t *labels,
-                         long count, const uint8_t *dims, double distance)
+ * dims flagged (squared distances against distance^2: no square root per example). Four
+ * examples at a time where the compiler has vector types: each lane computes an example's
+ * distance with the scalar loop's operations, so the answer is the same. */
+NATIVE_CLONES static int near_positive(const double *point, const double *examples,
+                                       const uint8_t *labels, long count, const uint8_t *dims,
+                                       double distance)
 {
     double m0 = dims[0], m1 = dims[1], m2 = dims[2], m3 = dims[3];
+    double p0 = point[0], p1 = point[1], p2 = point[2], p3 = point[3];
     double reach = distance * distance;
-    for (long c = 0; c < count; c++) {
+    long c = 0;
+#if defined(__GNUC__)
+    for (; c + 4 <= count; c += 4) {
+        const double *e = examples + c * OBS_DIM;
+        lanes4 x0 = {e[0], e[4], e[8], e[12]}, x1 = {e[1], e[5], e[9], e[13]};
+        lanes4 x2 = {e[2], e[6], e[10], e[14]}, x3 = {e[3], e[7], e[11], e[15]};
+        lanes4 d0 = (p0 - x0) * m0, d1 = (p1 - x1) * m1, d2 = (p2 - x2) * m2;
+        lanes4 d3 = (p3 - x3) * m3;
+        mask4 positive = {labels[c], labels[c + 1], labels[c + 2], labels[c + 3]};
+        mask4 hit = ((((d0 * d0 + d1 * d1) + d2 * d2) + d3 * d3) <= reach) & (positive != 0);
+        if (hit[0] | hit[1] | hit[2] | hit[3]) return 1;
+    }
+#endif
+    for (; c < count; c++) {
         if (!labels[c]) continue;
         const double *e = examples + c * OBS_DIM;
-        double d0 = (point[0] - e[0]) * m0, d1 = (point[1] - e[1]) * m1;
-        double d2 = (point[2] - e[2]) * m2, d3 = (point[3] - e[3]) * m3;
+        double d0 = (p0 - e[0]) * m0, d1 = (p1 - e[1]) * m1;
+        double d2 = (p2 - e[2]) * m2, d3 = (p3 - e[3]) * m3;
         if (((d0 * d0 + d1 * d1) + d2 * d2) + d3 * d3 <= reach) return 1;
     }
     return 0;
@@ -117,10 +141,6 @@ NATIVE_CLONES static PyObject *contains(PyObject *self, PyObject *args)
  * feature f side by side), and dv_f = sum_l x_l[f] g_l in the order of l (x [L, F1]: the
  * four features of a lane side by side). */
 #if defined(__GNUC__)
-typedef double lanes4 __attribute__((vector_size(32)));
-#define LOAD4(dst, src) memcpy(&(dst), (src), sizeof(lanes4))
-#define STORE4(dst, src) memcpy((dst), &(src), sizeof(lanes4))
-
 NATIVE_CLONES static void example_dots(const double *xt, const double *v, Py_ssize_t L, Py_ssize_t F1,
                          double *z)
 {
