@@ -129,6 +129,39 @@ static PyObject *record(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* outcomes(P, K, option, reached, duration, ended, terminated, max_steps, slot, success,
+ * failure) -> int: executions.execution_outcome for the executions that ended (ended[p] and
+ * option[p] >= 0): slot = max(option, 0); success: its target reached[p, slot] fired;
+ * failure: it did not, and ran duration >= max_steps steps or the episode terminated.
+ * Returns 0 if no execution ended, else 1 + 2 * (any failure). */
+static PyObject *outcomes(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K;
+    long long max_steps;
+    unsigned long long opt_p, reach_p, dur_p, end_p, term_p, slot_p, ok_p, bad_p;
+    if (!PyArg_ParseTuple(args, "nnKKKKKLKKK", &P, &K, &opt_p, &reach_p, &dur_p, &end_p,
+                          &term_p, &max_steps, &slot_p, &ok_p, &bad_p))
+        return NULL;
+    const int64_t *option = (const int64_t *)(uintptr_t)opt_p;
+    const int64_t *duration = (const int64_t *)(uintptr_t)dur_p;
+    const uint8_t *reached = (const uint8_t *)(uintptr_t)reach_p;
+    const uint8_t *ended = (const uint8_t *)(uintptr_t)end_p;
+    const uint8_t *terminated = (const uint8_t *)(uintptr_t)term_p;
+    int64_t *slot = (int64_t *)(uintptr_t)slot_p;
+    uint8_t *success = (uint8_t *)(uintptr_t)ok_p, *failure = (uint8_t *)(uintptr_t)bad_p;
+    int any = 0, any_failure = 0;
+    for (Py_ssize_t p = 0; p < P; p++) {
+        int64_t k = option[p] > 0 ? option[p] : 0;
+        int done = ended[p] && option[p] >= 0, hit = reached[p * K + k];
+        slot[p] = k;
+        success[p] = (uint8_t)(done && hit);
+        failure[p] = (uint8_t)(done && !hit && (duration[p] >= max_steps || terminated[p]));
+        any |= done;
+        any_failure |= failure[p];
+    }
+    return PyLong_FromLong(any ? 1 + 2 * any_failure : 0);
+}
+
 /* triggers(P, K, E, parent, target_event, status, base_now, base_next, contains,
  * contains_next, reached, stepped, sample, gestation_q, max_branching, out_gestation_q,
  * out_base_trig, out_slot_trig, out_base_now) -> bool: for the stepped rows, the base events
@@ -193,6 +226,7 @@ static PyObject *triggers(PyObject *self, PyObject *args)
 }
 
 static PyMethodDef methods[] = {
+    {"outcomes", outcomes, METH_VARARGS, "Success and failure of the executions that ended."},
     {"target_indicator", target_indicator, METH_VARARGS, "Each option's target at a state."},
     {"exclude_overlap", exclude_overlap, METH_VARARGS, "Memberships under the overlap rule."},
     {"event_list", event_list, METH_VARARGS, "The target events on each agent's list."},

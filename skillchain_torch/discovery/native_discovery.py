@@ -28,7 +28,7 @@ except ImportError:  # built without a C compiler: the torch path
     _c = None
 
 __all__ = ["NATIVE", "applies", "target_indicator", "event_list", "exclude_overlap", "record",
-           "triggers"]
+           "outcomes", "triggers"]
 
 NATIVE = _c is not None
 
@@ -86,6 +86,22 @@ def record(states: Tensor, rows: Tensor, step: Tensor, obs: Tensor) -> None:
     rows, step = _flags(rows), step.to(torch.int64).contiguous()
     obs = obs.to(torch.float64).contiguous()
     _c.record(P, T, rows.data_ptr(), step.data_ptr(), obs.data_ptr(), states.data_ptr())
+
+
+def outcomes(option: Tensor, reached: Tensor, duration: Tensor, ended: Tensor,
+             terminated: Tensor, max_steps: int) -> tuple[Tensor, Tensor, Tensor, bool, bool]:
+    """``(slot, success, failure, any_ended, any_failure)`` of the executions that ended
+    (``ended`` and an option executing): :func:`~.executions.execution_outcome` masked to them,
+    with ``slot = option.clamp(min=0)``."""
+    P, K = reached.shape
+    option, duration = option.contiguous(), duration.contiguous()
+    reached, ended, terminated = _flags(reached), _flags(ended), _flags(terminated)
+    slot = torch.empty(P, dtype=torch.int64)
+    success, failure = torch.empty(P, dtype=torch.bool), torch.empty(P, dtype=torch.bool)
+    code = _c.outcomes(P, K, option.data_ptr(), reached.data_ptr(), duration.data_ptr(),
+                       ended.data_ptr(), terminated.data_ptr(), int(max_steps), slot.data_ptr(),
+                       success.data_ptr(), failure.data_ptr())  # fmt: skip
+    return slot, success, failure, code > 0, code > 1
 
 
 def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Tensor,

@@ -213,13 +213,21 @@ class SkillChaining:
     def _finish_executions(self, option: Tensor, reached: Tensor, duration: Tensor,
                            ended: Tensor, terminated: Tensor) -> None:  # fmt: skip
         """Examples, refits and dropped updates of the executions that ended."""
-        ended = ended & (option >= 0)
-        if not bool(ended.any()):
-            return
-        slot = option.clamp(min=0)
-        hit = reached.gather(1, slot[:, None])[:, 0]
-        success, failure = execution_outcome(hit, duration, terminated, self.max_option_steps)
-        success, failure = success & ended, failure & ended
+        if native_discovery.applies(option, reached):  # the same outcomes, compiled
+            slot, success, failure, any_ended, any_failure = native_discovery.outcomes(
+                option, reached, duration, ended, terminated, self.max_option_steps)
+            if not any_ended:
+                return
+        else:
+            ended = ended & (option >= 0)
+            if not bool(ended.any()):
+                return
+            slot = option.clamp(min=0)
+            hit = reached.gather(1, slot[:, None])[:, 0]
+            success, failure = execution_outcome(hit, duration, terminated,
+                                                 self.max_option_steps)  # fmt: skip
+            success, failure = success & ended, failure & ended
+            any_failure = bool(failure.any())
         classifier = self.bank.classifier
         touched = self.trace.store_examples(classifier, slot, duration, success, failure)
         # Paper: 100 sweeps per new data point. Logistic regression on failures alone says
@@ -230,7 +238,7 @@ class SkillChaining:
         if bool(fit.any()):
             classifier.fit(fit)
             self.fitted |= fit
-        if bool(failure.any()):
+        if any_failure:
             self.trace.drop_updates(slot, failure)
 
     def _create(self, base_trig: Tensor, slot_trig: Tensor, contains: Tensor, option: Tensor,
