@@ -15,7 +15,10 @@ All are optional: without a C compiler the install still succeeds and the code f
 its torch and Python paths, only slower (each module's ``AVAILABLE``, e.g.
 ``skillchain_torch.envs.pinball.native.AVAILABLE``; ``skillchain_torch.features.fourier.NATIVE``).
 ``-ffp-contract=off`` keeps the compiler from fusing multiply-adds, which would change the last
-bits of trajectories.
+bits of trajectories; ``-fno-trapping-math`` (floating-point exceptions are never inspected) lets
+it turn comparisons into selects so that loops run several lanes wide, with the same values.
+The agent kernels' entry points are built twice on x86-64 Linux with GCC (``NATIVE_CLONES`` in
+``native_maths.h``: AVX2 and plain x86-64, picked when the module loads; the same bits).
 """
 
 from setuptools import Extension, setup
