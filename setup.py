@@ -9,7 +9,8 @@
 * ``skillchain_torch/agents/_hierarchical_native.c``: the hierarchical agent's per-step
   arithmetic (top-level choice and SMDP update, option actions, intra-option updates).
 
-The agent kernels share ``skillchain_torch/native_maths.h`` (dot products, epsilon-greedy).
+The agent kernels and the random draws share ``skillchain_torch/native_maths.h`` (dot products,
+epsilon-greedy, the sweeps' exponential, SplitMix64).
 
 All are optional: without a C compiler the install still succeeds and the code falls back to
 its torch and Python paths, only slower (each module's ``AVAILABLE``, e.g.
@@ -35,7 +36,7 @@ setup(
                   sources=["skillchain_torch/features/_fourier_native.c"], extra_compile_args=FLAGS,
                   optional=True),
         Extension("skillchain_torch._rng_native", sources=["skillchain_torch/_rng_native.c"],
-                  extra_compile_args=FLAGS, optional=True),
+                  **SHARED),
         Extension("skillchain_torch.discovery._discovery_native",
                   sources=["skillchain_torch/discovery/_discovery_native.c"],
                   extra_compile_args=FLAGS, optional=True),

@@ -10,15 +10,8 @@
 #include <Python.h>
 #include <stdint.h>
 
-#define GOLDEN_GAMMA 0x9E3779B97F4A7C15ULL
+#include "native_maths.h" /* splitmix64 */
 
-static uint64_t splitmix64(uint64_t x)
-{
-    uint64_t z = x + GOLDEN_GAMMA;
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    return z ^ (z >> 31);
-}
 
 /* draw(P, n, seeds, counter, mask, salt, as_uniform, out, new_counter): out[p, i] is word
  * counter[p] + i of agent p's stream (seeds[p] ^ salt), as int64 bits or as a uniform in

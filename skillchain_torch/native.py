@@ -1,4 +1,5 @@
-"""The one rule the compiled agent kernels share: a state resumes only on its own kind.
+"""What the compiled kernels' Python sides share: a state resumes only on its own kind, and
+arrays reach C contiguous and of the kernel's dtype (:func:`for_c`).
 
 The flat agent (:mod:`skillchain_torch.trainers.native_sarsa`) and the hierarchical agents
 (:mod:`skillchain_torch.agents.native_hierarchical`) each have a torch path and a compiled
@@ -12,11 +13,26 @@ Example:
     Traceback (most recent call last):
     ...
     ValueError: this state was saved by a torch-kernel agent, and this agent uses the native ...
+    >>> import torch
+    >>> flags = torch.ones(3, dtype=torch.bool)
+    >>> for_c(flags, torch.bool) is flags, for_c(torch.ones(3), torch.bool).dtype
+    (True, torch.bool)
 """
 
 from __future__ import annotations
 
-__all__ = ["check_same_kernels"]
+import torch
+
+__all__ = ["check_same_kernels", "for_c"]
+
+
+def for_c(x: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
+    """``x`` as a contiguous tensor of ``dtype`` whose address C may read; ``x`` itself, with no
+    call into torch, when it already is one (this runs a dozen times a step, and a no-op
+    ``Tensor.to`` still costs a few microseconds)."""
+    if x.dtype != dtype:
+        x = x.to(dtype)
+    return x if x.is_contiguous() else x.contiguous()
 
 
 def check_same_kernels(state: dict, native: bool) -> None:

@@ -1,5 +1,6 @@
-/* Arithmetic shared by the compiled agent kernels (trainers/_sarsa_native.c,
- * skillchain_torch/agents/_hierarchical_native.c, skillchain_torch/options/_initiation_native.c).
+/* Arithmetic shared by the compiled kernels (trainers/_sarsa_native.c,
+ * skillchain_torch/agents/_hierarchical_native.c, skillchain_torch/options/_initiation_native.c,
+ * skillchain_torch/_rng_native.c).
  *
  * dot: eight interleaved partial sums in a fixed order, so a value depends only on its two
  * vectors (not on the batch, the alignment or the other agents). It differs from torch's
@@ -10,6 +11,8 @@
  * maximisers of q are the candidates; u1 picks the floor(u1 * count)-th of them.
  *
  * exp_lane: the logistic sweeps' exponential (within 1 ulp of libm's; its own bits).
+ *
+ * splitmix64: the random streams' and the reservoir's hash (rng.py's, bit for bit).
  *
  * Compiled with -ffp-contract=off: no fused multiply-adds.
  */
@@ -94,6 +97,18 @@ static inline double exp_lane(double x)
     y = x > 709.8 ? INFINITY : y;
     y = x < -745.2 ? 0.0 : y;
     return x != x ? x : y;
+}
+
+#define GOLDEN_GAMMA 0x9E3779B97F4A7C15ULL
+
+/* SplitMix64's output function, as skillchain_torch.rng.splitmix64 (uint64 arithmetic wraps
+ * as torch's int64 does): CounterRNG's draws and the example stores' reservoir hash. */
+static inline uint64_t splitmix64(uint64_t x)
+{
+    uint64_t z = x + GOLDEN_GAMMA;
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
 }
 
 /* Largest of q[d] over the d with ok[d] (all when ok is 0); NaN if any of them is NaN (as

@@ -22,6 +22,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from skillchain_torch.native import for_c
+
 try:
     from skillchain_torch.discovery import _discovery_native as _c
 except ImportError:  # built without a C compiler: the torch path
@@ -39,10 +41,7 @@ def applies(*tensors: Tensor) -> bool:
 
 
 def _flags(x: Tensor) -> Tensor:
-    # Called a dozen times a step: skip the conversions that would return x itself.
-    if x.dtype != torch.bool:
-        x = x.to(torch.bool)
-    return x if x.is_contiguous() else x.contiguous()
+    return for_c(x, torch.bool)
 
 
 def target_indicator(parent: Tensor, target_event: Tensor, status: Tensor, base_fired: Tensor,

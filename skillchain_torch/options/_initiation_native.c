@@ -136,15 +136,15 @@ NATIVE_CLONES static PyObject *contains(PyObject *self, PyObject *args)
 }
 
 /* The two sums of a sweep over L examples of F1 features, written so that a compiler runs
- * them four lanes wide, each lane doing what the plain loops below do (so the same bits):
+ * them four lanes wide, each lane doing what the plain loop at the end does (so the same bits):
  * z_l = dot(x_l, v) for every l, from the examples transposed (xt [F1, L]: four examples'
  * feature f side by side), and dv_f = sum_l x_l[f] g_l in the order of l (x [L, F1]: the
  * four features of a lane side by side). */
-#if defined(__GNUC__)
-NATIVE_CLONES static void example_dots(const double *xt, const double *v, Py_ssize_t L, Py_ssize_t F1,
-                         double *z)
+NATIVE_CLONES static void example_dots(const double *xt, const double *v, Py_ssize_t L,
+                                      Py_ssize_t F1, double *z)
 {
     Py_ssize_t l = 0;
+#if defined(__GNUC__)
     for (; l + 4 <= L; l += 4) { /* native_maths.h's dot, four examples at a time */
         lanes4 s[8] = {{0.0}}, tail = {0.0}, column;
         Py_ssize_t f = 0;
@@ -160,7 +160,8 @@ NATIVE_CLONES static void example_dots(const double *xt, const double *v, Py_ssi
         lanes4 r = (((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]))) + tail;
         STORE4(z + l, r);
     }
-    for (; l < L; l++) { /* the last few, one at a time */
+#endif
+    for (; l < L; l++) { /* one at a time: the last few, or all without vector types */
         double s[8] = {0.0}, tail = 0.0;
         Py_ssize_t f = 0;
         for (; f + 8 <= F1; f += 8)
@@ -170,10 +171,11 @@ NATIVE_CLONES static void example_dots(const double *xt, const double *v, Py_ssi
     }
 }
 
-NATIVE_CLONES static void feature_sums(const double *x, const double *g, Py_ssize_t L, Py_ssize_t F1,
-                         double *dv)
+NATIVE_CLONES static void feature_sums(const double *x, const double *g, Py_ssize_t L,
+                                      Py_ssize_t F1, double *dv)
 {
     Py_ssize_t f = 0;
+#if defined(__GNUC__)
     for (; f + 16 <= F1; f += 16) { /* four independent chains of additions */
         lanes4 a0 = {0.0}, a1 = {0.0}, a2 = {0.0}, a3 = {0.0}, r0, r1, r2, r3;
         for (Py_ssize_t l = 0; l < L; l++) {
@@ -200,36 +202,13 @@ NATIVE_CLONES static void feature_sums(const double *x, const double *g, Py_ssiz
         }
         STORE4(dv + f, a);
     }
-    for (; f < F1; f++) {
-        double a = 0.0;
-        for (Py_ssize_t l = 0; l < L; l++) a += x[l * F1 + f] * g[l];
-        dv[f] = a;
-    }
-}
-#else
-NATIVE_CLONES static void example_dots(const double *xt, const double *v, Py_ssize_t L, Py_ssize_t F1,
-                         double *z)
-{
-    for (Py_ssize_t l = 0; l < L; l++) {
-        double s[8] = {0.0}, tail = 0.0;
-        Py_ssize_t f = 0;
-        for (; f + 8 <= F1; f += 8)
-            for (int j = 0; j < 8; j++) s[j] += xt[(f + j) * L + l] * v[f + j];
-        for (; f < F1; f++) tail += xt[f * L + l] * v[f];
-        z[l] = (((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]))) + tail;
-    }
-}
-
-NATIVE_CLONES static void feature_sums(const double *x, const double *g, Py_ssize_t L, Py_ssize_t F1,
-                         double *dv)
-{
-    for (Py_ssize_t f = 0; f < F1; f++) {
-        double a = 0.0;
-        for (Py_ssize_t l = 0; l < L; l++) a += x[l * F1 + f] * g[l];
-        dv[f] = a;
-    }
-}
 #endif
+    for (; f < F1; f++) { /* one feature at a time */
+        double a = 0.0;
+        for (Py_ssize_t l = 0; l < L; l++) a += x[l * F1 + f] * g[l];
+        dv[f] = a;
+    }
+}
 
 /* Doubles of scratch sweep_slot needs. */
 static size_t sweep_work(Py_ssize_t L, Py_ssize_t F1) { return (size_t)(L * F1 + 2 * L + F1 + 1); }
@@ -340,16 +319,6 @@ static PyObject *fit(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
-#define GOLDEN_GAMMA 0x9E3779B97F4A7C15ULL
-
-/* SplitMix64's output function (as skillchain_torch.rng.splitmix64, uint64 wrap-around). */
-static uint64_t splitmix64(uint64_t x)
-{
-    uint64_t z = x + GOLDEN_GAMMA;
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    return z ^ (z >> 31);
-}
 
 /* The classifier's stores, as passed to store and store_executions after their own
  * arguments: seeds, generation, salt, ring, seen, examples, labels, count, touched. */

@@ -28,6 +28,7 @@ from torch import Tensor, nn
 
 from skillchain_torch.features import PolynomialFeatures
 from skillchain_torch.invariant import rowwise_dot, rowwise_sum
+from skillchain_torch.native import for_c
 from skillchain_torch.options import native_initiation
 from skillchain_torch.options.examples import REPLACEMENTS, store_places
 from skillchain_torch.options.logistic import logistic_sweeps
@@ -35,16 +36,6 @@ from skillchain_torch.options.q_head import _DTYPES, OBS_DIM, dtype_name
 from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask, slot_mask
 
 _POINTS_CHUNK = 8192  # points per membership evaluation (bounds the [N, M] distance matrix)
-
-
-def _f64(x: Tensor) -> Tensor:
-    x = x if x.dtype == torch.float64 else x.to(torch.float64)
-    return x if x.is_contiguous() else x.contiguous()
-
-
-def _bool(x: Tensor) -> Tensor:
-    x = x if x.dtype == torch.bool else x.to(torch.bool)
-    return x if x.is_contiguous() else x.contiguous()
 
 
 class InitiationClassifier(nn.Module):
@@ -313,8 +304,9 @@ class InitiationClassifier(nn.Module):
         k = torch.as_tensor(slots, dtype=torch.int64, device=device).expand(n)
         if self.native:  # one compiled pass, the same places and bits
             touched = torch.zeros(self.population, self.slots, dtype=torch.bool)
-            if not native_initiation.store(self, p.contiguous(), k.contiguous(), _f64(obs),
-                                           _bool(labels), touched):  # fmt: skip
+            if not native_initiation.store(self, p.contiguous(), k.contiguous(),
+                                           for_c(obs, torch.float64), for_c(labels, torch.bool),
+                                           touched):  # fmt: skip
                 raise ValueError(f"agent/slot indices out of range for P={self.population}, "
                                  f"K={self.slots}")  # fmt: skip
             self.dirty |= touched
@@ -360,7 +352,7 @@ class InitiationClassifier(nn.Module):
         mask = self.dirty if mask is None else check_slot_mask(mask, self.population, self.slots)
         if self.native:  # every slot in one compiled pass, the same bits
             return native_initiation.fit(
-                self.features, self.centered, _bool(mask), self.examples, self.labels,
+                self.features, self.centered, for_c(mask, torch.bool), self.examples, self.labels,
                 self.count, self.weight, self.bias, self.lr, self.sweeps, self.balanced,
                 self.sweeps_done, self.trained, self.dirty)  # fmt: skip
         mask = mask.to(self.weight.device) & (self.count > 0)
