@@ -252,6 +252,13 @@ class HierarchicalAgent(nn.Module):
             return phi, self.bank.q_head.encode(obs)
         return phi, phi[:, self._code_columns]
 
+    def _encode_rows(self, obs: Tensor, index: Tensor) -> tuple[Tensor, Tensor]:
+        """:meth:`_encode` of the rows ``index`` of ``obs [P, 4]`` only: ``[len(index), .]``."""
+        phi = self.features(obs[index])
+        if self._code_columns is None:  # a head's code may need every row (its shape check)
+            return phi, self.bank.q_head.encode(obs)[index]
+        return phi, phi[:, self._code_columns]
+
     def _choose(self, obs: Tensor, phi: Tensor, contains: Tensor, uniforms: Tensor,
                 rows: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
         """Top-level epsilon-greedy decision at ``obs``; ``(phi, decision)``.
@@ -296,24 +303,38 @@ class HierarchicalAgent(nn.Module):
 
     def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
         """Rows ``rows [P]`` start an episode at ``obs [P, 4]`` (other rows of ``obs`` are
-        ignored): fresh decision and action, 4 uniforms drawn."""
+        ignored): fresh decision and action, 4 uniforms drawn.
+
+        Episodes end a few agents at a time, so only those rows' features are computed (a
+        row's features are its own: the same bits in any batch) and copied into
+        ``option_code`` and ``decision_phi``; ``last_phi`` holds them, zeros elsewhere.
+        """
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=rows)
         obs = torch.where(rows[:, None], obs, self.obs)
         contains = self.membership(obs)
-        phi, code = self._encode(obs)
+        index = rows.nonzero()[:, 0]
+        phi_rows, code_rows = self._encode_rows(obs, index)
+        phi = obs.new_zeros(self.population, phi_rows.shape[1])
+        phi[index] = phi_rows
         phi, decision = self._choose(obs, phi, contains, u[:, :2], rows=rows)
         self.obs = obs
-        self.option_code = torch.where(rows[:, None], code, self.option_code)
+        self.option_code = self.option_code.index_copy(0, index, code_rows)
         self.contains = torch.where(rows[:, None], contains, self.contains)
-        self._new_decisions(rows, phi, decision)
+        self._new_decisions(rows, phi_rows, decision, index=index)
         self._act(rows, u[:, 2:])
 
-    def _new_decisions(self, rows: Tensor, phi: Tensor, decision: Tensor) -> None:
+    def _new_decisions(self, rows: Tensor, phi: Tensor, decision: Tensor,
+                       index: Tensor | None = None) -> None:  # fmt: skip
+        """Rows ``rows [P]`` take ``decision [P]`` with features ``phi [P, F]``, or with
+        ``index`` (the rows' ids) ``phi [len(index), F]``."""
         self.decision = torch.where(rows, decision, self.decision)
         option = torch.where(decision >= NUM_PRIMITIVES, decision - NUM_PRIMITIVES,
                              torch.full_like(decision, -1))
         self.option = torch.where(rows, option, self.option)
-        self.decision_phi = torch.where(rows[:, None], phi, self.decision_phi)
+        if index is None:
+            self.decision_phi = torch.where(rows[:, None], phi, self.decision_phi)
+        else:
+            self.decision_phi = self.decision_phi.index_copy(0, index, phi)
         self.decision_return = torch.where(rows, torch.zeros_like(self.decision_return),
                                            self.decision_return)
         self.duration = torch.where(rows, torch.zeros_like(self.duration), self.duration)
