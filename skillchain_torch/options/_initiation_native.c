@@ -38,6 +38,11 @@ typedef long long mask4 __attribute__((vector_size(32)));
 #define STORE4(dst, src) memcpy((dst), &(src), sizeof(lanes4))
 #endif
 
+/* Examples a distance scan asks the memory for ahead of the one it tests (32 bytes each). */
+#define PREFETCH_AHEAD 16
+/* Slots whose distance tests contains starts fetching ahead of the one it runs. */
+#define SLOTS_AHEAD 4
+
 /* Within `distance` of one of the first `count` stored examples labelled positive, in the
  * dims flagged (squared distances against distance^2: no square root per example). Four
  * examples at a time where the compiler has vector types: each lane computes an example's
@@ -53,6 +58,10 @@ NATIVE_CLONES static int near_positive(const double *point, const double *exampl
 #if defined(__GNUC__)
     for (; c + 4 <= count; c += 4) {
         const double *e = examples + c * OBS_DIM;
+        /* the two cache lines PREFETCH_AHEAD examples on (a scan is too short for the
+         * hardware to notice a stream before it ends) */
+        PREFETCH(e + PREFETCH_AHEAD * OBS_DIM);
+        PREFETCH(e + PREFETCH_AHEAD * OBS_DIM + 8);
         lanes4 x0 = {e[0], e[4], e[8], e[12]}, x1 = {e[1], e[5], e[9], e[13]};
         lanes4 x2 = {e[2], e[6], e[10], e[14]}, x3 = {e[3], e[7], e[11], e[15]};
         lanes4 d0 = (p0 - x0) * m0, d1 = (p1 - x1) * m1, d2 = (p2 - x2) * m2;
@@ -70,6 +79,13 @@ NATIVE_CLONES static int near_positive(const double *point, const double *exampl
         if (((d0 * d0 + d1 * d1) + d2 * d2) + d3 * d3 <= reach) return 1;
     }
     return 0;
+}
+
+/* The first PREFETCH_AHEAD examples of a slot's store and its first labels, asked for early. */
+static inline void fetch_first_examples(const double *examples, const uint8_t *labels)
+{
+    for (int line = 0; line < PREFETCH_AHEAD * OBS_DIM; line += 8) PREFETCH(examples + line);
+    PREFETCH(labels);
 }
 
 #define MAX_FEATURES 256
@@ -121,17 +137,34 @@ NATIVE_CLONES static PyObject *contains(PyObject *self, PyObject *args)
     const uint8_t *dims = (const uint8_t *)(uintptr_t)dims_p;
     const int64_t *count = (const int64_t *)(uintptr_t)cnt_p;
     uint8_t *out = (uint8_t *)(uintptr_t)out_p;
+    /* Pass 1: the logits; the slots that still need the distance test are listed. Pass 2:
+     * those tests, each slot's first examples and labels fetched SLOTS_AHEAD tests early. The
+     * stores (P K C examples) are far larger than the caches, and a test that hits reads a
+     * few dozen examples: waiting on memory for each slot in turn was most of its cost. */
+    Py_ssize_t *pending = (Py_ssize_t *)malloc(sizeof(Py_ssize_t) * (size_t)(P * K + 1));
+    if (!pending) return PyErr_NoMemory();
+    Py_ssize_t n = 0;
     for (Py_ssize_t p = 0; p < P; p++) {
         polynomial_row(obs + p * OBS_DIM, factor_index, F, degree, centered, phi);
         for (Py_ssize_t k = 0; k < K; k++) {
             Py_ssize_t s = p * K + k;
             int member = !trained[s] || dot(w + s * F, phi, F) + bias[s] > 0.0;
-            if (member && constrained[s])
-                member = near_positive(obs + p * OBS_DIM, examples + s * C * OBS_DIM,
-                                       labels + s * C, (long)count[s], dims, distance);
+            if (member && constrained[s]) pending[n++] = s;
             out[s] = (uint8_t)member;
         }
     }
+    for (Py_ssize_t i = 0; i < n && i < SLOTS_AHEAD; i++)
+        fetch_first_examples(examples + pending[i] * C * OBS_DIM, labels + pending[i] * C);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (i + SLOTS_AHEAD < n) {
+            Py_ssize_t t = pending[i + SLOTS_AHEAD];
+            fetch_first_examples(examples + t * C * OBS_DIM, labels + t * C);
+        }
+        Py_ssize_t s = pending[i], p = s / K;
+        out[s] = (uint8_t)near_positive(obs + p * OBS_DIM, examples + s * C * OBS_DIM,
+                                        labels + s * C, (long)count[s], dims, distance);
+    }
+    free(pending);
     Py_RETURN_NONE;
 }
 
