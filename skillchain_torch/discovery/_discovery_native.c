@@ -13,6 +13,7 @@
 #include <Python.h>
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 #define OBS_DIM 4
 #define GESTATING 1
@@ -129,6 +130,33 @@ static PyObject *record(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* copy_slots(P, K, n, slots, rows, slot, held, to_slots): for each agent p in rows (uint8
+ * [P]), held[p] = slots[p, max(slot[p], 0)] (to_slots 0: keep an option's weights when its
+ * execution starts) or the reverse (to_slots 1: put them back when it failed); slots is
+ * float64 [P, K, n], held [P, n]. ExecutionTrace.start / drop_updates: copies, the same bits. */
+static PyObject *copy_slots(PyObject *self, PyObject *args)
+{
+    Py_ssize_t P, K, n;
+    unsigned long long slots_p, rows_p, slot_p, held_p;
+    int to_slots;
+    if (!PyArg_ParseTuple(args, "nnnKKKKi", &P, &K, &n, &slots_p, &rows_p, &slot_p, &held_p,
+                          &to_slots))
+        return NULL;
+    double *slots = (double *)(uintptr_t)slots_p, *held = (double *)(uintptr_t)held_p;
+    const uint8_t *rows = (const uint8_t *)(uintptr_t)rows_p;
+    const int64_t *slot = (const int64_t *)(uintptr_t)slot_p;
+    for (Py_ssize_t p = 0; p < P; p++) {
+        if (!rows[p]) continue;
+        int64_t k = slot[p] > 0 ? slot[p] : 0;
+        double *in_slot = slots + (p * K + k) * n, *kept = held + p * n;
+        if (to_slots)
+            memcpy(in_slot, kept, sizeof(double) * (size_t)n);
+        else
+            memcpy(kept, in_slot, sizeof(double) * (size_t)n);
+    }
+    Py_RETURN_NONE;
+}
+
 /* outcomes(P, K, option, reached, duration, ended, terminated, max_steps, slot, success,
  * failure) -> int: executions.execution_outcome for the executions that ended (ended[p] and
  * option[p] >= 0): slot = max(option, 0); success: its target reached[p, slot] fired;
@@ -231,6 +259,7 @@ static PyMethodDef methods[] = {
     {"exclude_overlap", exclude_overlap, METH_VARARGS, "Memberships under the overlap rule."},
     {"event_list", event_list, METH_VARARGS, "The target events on each agent's list."},
     {"record", record, METH_VARARGS, "Executing agents' states into the trace."},
+    {"copy_slots", copy_slots, METH_VARARGS, "One option's weights per agent, kept or put back."},
     {"triggers", triggers, METH_VARARGS, "Entered events and gestation samples of a step."},
     {NULL, NULL, 0, NULL},
 };

@@ -78,12 +78,16 @@ class ExecutionTrace:
 
     def start(self, rows: Tensor, slot: Tensor) -> None:
         """Agents in ``rows [P]`` start executing option ``slot [P]``: keep its weights."""
+        tensors = self.q_head.slot_tensors()
+        if all(native_discovery.copy_slots(value, rows, slot, self.snapshot[name], False)
+               for name, value in tensors.items()):  # fmt: skip
+            return  # one compiled copy per tensor
         index = rows.nonzero()[:, 0]
         if index.numel() == 0:
             return
         # Copy just the starting agents' slots (a few rows of [P, ...] weights).
         k = slot[index].clamp(min=0)
-        for name, value in self.q_head.slot_tensors().items():
+        for name, value in tensors.items():
             self.snapshot[name][index] = value[index, k].to(self.snapshot[name].dtype)
 
     def record(self, rows: Tensor, step: Tensor, obs: Tensor) -> None:
@@ -129,6 +133,10 @@ class ExecutionTrace:
 
     def drop_updates(self, slot: Tensor, failure: Tensor) -> None:
         """Put the options of failed executions back as they were when they started."""
+        tensors = self.q_head.slot_tensors()
+        if all(native_discovery.copy_slots(value, failure, slot, self.snapshot[name], True)
+               for name, value in tensors.items()):  # fmt: skip
+            return
         self.q_head.write_slots(slot, self.snapshot, failure)
 
     def state_dict(self) -> dict:

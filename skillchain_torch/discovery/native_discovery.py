@@ -30,7 +30,7 @@ except ImportError:  # built without a C compiler: the torch path
     _c = None
 
 __all__ = ["NATIVE", "applies", "target_indicator", "event_list", "exclude_overlap", "record",
-           "outcomes", "triggers"]
+           "copy_slots", "outcomes", "triggers"]
 
 NATIVE = _c is not None
 
@@ -85,6 +85,21 @@ def record(states: Tensor, rows: Tensor, step: Tensor, obs: Tensor) -> None:
     rows, step = _flags(rows), step.to(torch.int64).contiguous()
     obs = obs.to(torch.float64).contiguous()
     _c.record(P, T, rows.data_ptr(), step.data_ptr(), obs.data_ptr(), states.data_ptr())
+
+
+def copy_slots(slots: Tensor, rows: Tensor, slot: Tensor, held: Tensor, to_slots: bool) -> bool:
+    """``held[p] = slots[p, max(slot[p], 0)]`` for the agents in ``rows [P]`` (or the reverse
+    with ``to_slots``), in place, when ``slots [P, K, ...]`` and ``held [P, ...]`` are
+    contiguous CPU float64; ``False`` (nothing done) otherwise."""
+    f64 = torch.float64
+    if not (slots.dtype == f64 and held.dtype == f64 and slots.is_contiguous()
+            and held.is_contiguous() and applies(slots, held, rows, slot)):  # fmt: skip
+        return False
+    P, K = slots.shape[:2]
+    rows, slot = _flags(rows), slot.to(torch.int64).contiguous()
+    _c.copy_slots(P, K, slots[0, 0].numel(), slots.data_ptr(), rows.data_ptr(), slot.data_ptr(),
+                  held.data_ptr(), int(to_slots))  # fmt: skip
+    return True
 
 
 def outcomes(option: Tensor, reached: Tensor, duration: Tensor, ended: Tensor,

@@ -71,6 +71,49 @@ def test_record_equals_torch(monkeypatch):
 
 
 @needs_native
+@pytest.mark.parametrize("head_kind", ["fourier", "mlp"])
+def test_snapshots_and_dropped_updates_equal_torch(head_kind, monkeypatch):
+    """ExecutionTrace.start keeps, and drop_updates puts back, the same weights either way."""
+    from skillchain_torch.options import MLPOptionQHead
+
+    P, K = 12, 3
+    g = torch.Generator().manual_seed(5)
+    heads, traces = [], []
+    for _ in range(2):
+        head = (OptionBank.build(P, K, order=1).q_head if head_kind == "fourier"
+                else MLPOptionQHead(P, K, hidden=4, layers=1, seed=0))  # fmt: skip
+        for t in head.slot_tensors().values():
+            t.copy_(torch.rand(t.shape, dtype=t.dtype, generator=torch.Generator().manual_seed(1)))
+        heads.append(head)
+        traces.append(ExecutionTrace(P, 5, head))
+    for t in range(6):
+        rows, failure = flags(P, 10 + t), flags(P, 20 + t, p=0.3)
+        slot = torch.randint(-1, K, (P,), generator=g)  # -1: reads slot 0, as torch does
+        noise = torch.rand(heads[0].slot_tensors()[next(iter(heads[0].slot_tensors()))].shape,
+                           dtype=torch.float64, generator=g)
+        for native, head, trace in zip((True, False), heads, traces):
+            monkeypatch.setattr(native_discovery, "NATIVE", native)
+            trace.start(rows, slot)
+            next(iter(head.slot_tensors().values())).add_(noise)  # the execution's updates
+            trace.drop_updates(slot.clamp(min=0), failure)
+    for name in traces[0].snapshot:
+        assert torch.equal(traces[0].snapshot[name], traces[1].snapshot[name])
+    for a, b in zip(heads[0].slot_tensors().values(), heads[1].slot_tensors().values()):
+        assert torch.equal(a, b)
+    assert bool((traces[0].snapshot[name] != 0).any())
+    # A copy really happened: compiled, the put-back slots equal their snapshots.
+    monkeypatch.setattr(native_discovery, "NATIVE", True)
+    rows = torch.ones(P, dtype=torch.bool)
+    slot = torch.zeros(P, dtype=torch.int64)
+    traces[0].start(rows, slot)
+    for t in heads[0].slot_tensors().values():
+        t.mul_(2.0)
+    traces[0].drop_updates(slot, rows)
+    for name, t in heads[0].slot_tensors().items():
+        assert torch.equal(t[:, 0], traces[0].snapshot[name])
+
+
+@needs_native
 def test_after_transition_equals_torch(monkeypatch):
     """Triggers, gestation samples and base events of a step, with the same creations."""
     P, K = 40, 5
