@@ -357,10 +357,11 @@ class HierarchicalAgent(nn.Module):
         """
         # What may be changed by a subclass or the user (memberships, target events) is
         # evaluated here for both paths.
-        terminated = as_bool(terminated) & stepped
-        truncated = as_bool(truncated) & stepped
+        terminated, truncated = as_bool(terminated), as_bool(truncated)
         reward = reward if reward.dtype == torch.float64 else reward.to(torch.float64)
-        next_obs = torch.where(stepped[:, None], next_obs, self.obs)
+        if not self.all_stepped(stepped):  # (with every agent stepped the masks change nothing)
+            terminated, truncated = terminated & stepped, truncated & stepped
+            next_obs = torch.where(stepped[:, None], next_obs, self.obs)
         contains_next = self.membership(next_obs)
         reached = self.targets(next_obs, terminated, contains_next)
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
@@ -410,6 +411,12 @@ class HierarchicalAgent(nn.Module):
         self.option = torch.where(ended, torch.full_like(self.option, -1), self.option)
         self._act(continuing, u[:, 2:])
         return info
+
+    def all_stepped(self, stepped: Tensor) -> bool:
+        """``stepped`` is the agent's own ``active`` mask with every agent active (what
+        :meth:`observe` passes): per-row masking by it changes nothing, so it can be skipped
+        (a check without a call into torch)."""
+        return stepped is self.active and self._index.numel() == self.population
 
     # ------------------------------------------------------------------ protocol
     def _full(self, rows_value: Tensor, fill: Tensor) -> Tensor:

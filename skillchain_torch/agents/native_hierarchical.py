@@ -138,21 +138,21 @@ def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, trun
     columns = agent._code_columns
     next_code = bank.q_head.encode(next_obs) if columns is None else None
     reward, reached = reward.contiguous(), reached.contiguous()
-    f64, i64, b = dict(dtype=torch.float64), dict(dtype=torch.int64), dict(dtype=torch.bool)
+    f64, b = dict(dtype=torch.float64), dict(dtype=torch.bool)
     # The two large state arrays are updated in place (see the C step); they are the agent's
-    # own (every other writer replaces them), so nothing else sees the change.
-    out = {
-        "obs": torch.empty(P, 4, **f64), "option_code": _own(agent, "option_code"),
-        "contains": torch.empty(P, K, **b), "decision_phi": _own(agent, "decision_phi"),
-        "decision": torch.empty(P, **i64), "option": torch.empty(P, **i64),
-        "action": torch.empty(P, **i64), "decision_return": torch.empty(P, **f64),
-        "duration": torch.empty(P, **i64), "q": torch.empty(P, D, **f64),
-        "d_next": torch.empty(P, **i64), "decision_ended": torch.empty(P, **b),
-        "option_delta": torch.empty(P, K, **f64), "smdp_delta": torch.empty(P, **f64),
-        "info_duration": torch.empty(P, **i64), "info_return": torch.empty(P, **f64),
-        "started": torch.empty(P, **b),
-    }  # fmt: skip
-    value = torch.empty(P, **f64) if agent.WANTS_VALUE else None
+    # own (every other writer replaces them), so nothing else sees the change. The [P]
+    # outputs are rows of three fresh blocks (one allocation per dtype, not one per output).
+    i64_rows = torch.empty(6, P, dtype=torch.int64).unbind(0)
+    f64_rows = torch.empty(4, P, **f64).unbind(0)
+    b_rows = torch.empty(2, P, **b).unbind(0)
+    out = dict(zip(("decision", "option", "action", "duration", "d_next", "info_duration"),
+                   i64_rows))  # fmt: skip
+    out.update(zip(("decision_return", "smdp_delta", "info_return"), f64_rows))
+    out.update(zip(("decision_ended", "started"), b_rows))
+    out.update(obs=torch.empty(P, 4, **f64), option_code=_own(agent, "option_code"),
+               contains=torch.empty(P, K, **b), decision_phi=_own(agent, "decision_phi"),
+               q=torch.empty(P, D, **f64), option_delta=torch.empty(P, K, **f64))
+    value = f64_rows[3] if agent.WANTS_VALUE else None
     step_size, gamma = agent.update.step_size, agent.gamma
     _c.step(P, K, A, F, Fo, head.weight.data_ptr(), bank.q_head.weight.data_ptr(),
             *(getattr(agent, name).data_ptr() for name in STATE),
@@ -170,8 +170,8 @@ def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, trun
             "decision_return": out["info_return"], "option_delta": out["option_delta"],
             "smdp_delta": out["smdp_delta"], "decision": agent.decision,
             "option": agent.option, "reached": reached}  # fmt: skip
-    for name in STATE:
-        setattr(agent, name, out[name])
-    agent.last_phi, agent.last_q, agent.last_value = phi_next, out["q"], value
+    # Plain attributes (HierarchicalAgent._PLAIN), set in one call.
+    agent.__dict__.update({name: out[name] for name in STATE}, last_phi=phi_next,
+                          last_q=out["q"], last_value=value)  # fmt: skip
     agent._options_starting(out["started"])
     return info

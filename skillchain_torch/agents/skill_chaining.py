@@ -127,13 +127,17 @@ class SkillChainingAgent(HierarchicalAgent):
     def transition(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
                    truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:  # fmt: skip
         contains, option, value = self.contains, self.option, self.q_decision
-        self.discovery.record(stepped & (option >= 0), self.duration, self.obs)
+        every = self.all_stepped(stepped)  # masks by stepped are then skipped
+        executing = option >= 0
+        self.discovery.record(executing if every else stepped & executing, self.duration,
+                              self.obs)  # fmt: skip
         info = super().transition(next_obs, reward, terminated, truncated, stepped)
+        terminated = as_bool(terminated)
         created = self.discovery.after_transition(
             contains=contains, option=option, value=value,
             contains_next=self.contains, reached=info["reached"], duration=info["duration"],
-            decision_ended=info["decision_ended"], terminated=as_bool(terminated) & stepped,
-            stepped=stepped,
+            decision_ended=info["decision_ended"],
+            terminated=terminated if every else terminated & stepped, stepped=stepped,
         )  # fmt: skip
         if bool(created.any()):  # the new slot changes the memberships at s'
             self.contains = torch.where(created[:, None], self.membership(self.obs),
@@ -148,7 +152,8 @@ class SkillChainingAgent(HierarchicalAgent):
             if going_on.numel() > 0:
                 value_next[going_on] = self.q_head.q_value(self.last_phi, self.decision,
                                                            going_on)  # fmt: skip
-        self.q_decision = torch.where(stepped, value_next, self.q_decision)
+        self.q_decision = value_next if every else torch.where(stepped, value_next,
+                                                                 self.q_decision)  # fmt: skip
         self._begin_executions()
         return info
 
