@@ -37,7 +37,12 @@ NATIVE = _c is not None
 
 def applies(*tensors: Tensor) -> bool:
     """The compiled path is on and every tensor is on the CPU."""
-    return NATIVE and all(t.is_cpu for t in tensors)
+    if not NATIVE:
+        return False
+    for t in tensors:  # (a loop, not all() over a generator: this runs several times a step)
+        if not t.is_cpu:
+            return False
+    return True
 
 
 def _flags(x: Tensor) -> Tensor:
@@ -82,8 +87,7 @@ def exclude_overlap(contains: Tensor, exclusion: Tensor, trained: Tensor) -> Ten
 def record(states: Tensor, rows: Tensor, step: Tensor, obs: Tensor) -> None:
     """``states[p, min(step[p], T - 1)] = obs[p]`` for ``rows`` (float64 ``states``)."""
     P, T, _ = states.shape
-    rows, step = _flags(rows), step.to(torch.int64).contiguous()
-    obs = obs.to(torch.float64).contiguous()
+    rows, step, obs = _flags(rows), for_c(step, torch.int64), for_c(obs, torch.float64)
     _c.record(P, T, rows.data_ptr(), step.data_ptr(), obs.data_ptr(), states.data_ptr())
 
 
@@ -96,22 +100,27 @@ def copy_slots(slots: Tensor, rows: Tensor, slot: Tensor, held: Tensor, to_slots
             and held.is_contiguous() and applies(slots, held, rows, slot)):  # fmt: skip
         return False
     P, K = slots.shape[:2]
-    rows, slot = _flags(rows), slot.to(torch.int64).contiguous()
+    rows, slot = _flags(rows), for_c(slot, torch.int64)
     _c.copy_slots(P, K, slots[0, 0].numel(), slots.data_ptr(), rows.data_ptr(), slot.data_ptr(),
                   held.data_ptr(), int(to_slots))  # fmt: skip
     return True
 
 
 def outcomes(option: Tensor, reached: Tensor, duration: Tensor, ended: Tensor,
-             terminated: Tensor, max_steps: int) -> tuple[Tensor, Tensor, Tensor, bool, bool]:
+             terminated: Tensor, max_steps: int,
+             out: tuple[Tensor, Tensor, Tensor] | None = None,
+             ) -> tuple[Tensor, Tensor, Tensor, bool, bool]:  # fmt: skip
     """``(slot, success, failure, any_ended, any_failure)`` of the executions that ended
     (``ended`` and an option executing): :func:`~.executions.execution_outcome` masked to them,
-    with ``slot = option.clamp(min=0)``."""
+    with ``slot = option.clamp(min=0)``. ``out``: contiguous ``(slot [P] int64, success [P]
+    bool, failure [P] bool)`` to write them into (a caller's scratch), else new tensors."""
     P, K = reached.shape
-    option, duration = option.contiguous(), duration.contiguous()
+    option, duration = for_c(option, torch.int64), for_c(duration, torch.int64)
     reached, ended, terminated = _flags(reached), _flags(ended), _flags(terminated)
-    slot = torch.empty(P, dtype=torch.int64)
-    success, failure = torch.empty(P, dtype=torch.bool), torch.empty(P, dtype=torch.bool)
+    if out is None:
+        out = (torch.empty(P, dtype=torch.int64), torch.empty(P, dtype=torch.bool),
+               torch.empty(P, dtype=torch.bool))  # fmt: skip
+    slot, success, failure = out
     code = _c.outcomes(P, K, option.data_ptr(), reached.data_ptr(), duration.data_ptr(),
                        ended.data_ptr(), terminated.data_ptr(), int(max_steps), slot.data_ptr(),
                        success.data_ptr(), failure.data_ptr())  # fmt: skip
@@ -120,19 +129,23 @@ def outcomes(option: Tensor, reached: Tensor, duration: Tensor, ended: Tensor,
 
 def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Tensor,
              base_next: Tensor, contains: Tensor, contains_next: Tensor, reached: Tensor,
-             stepped: Tensor, sample: Tensor, gestation_q: Tensor,
-             max_branching: int) -> tuple[Tensor, Tensor, Tensor, Tensor, bool]:  # fmt: skip
+             stepped: Tensor, sample: Tensor, gestation_q: Tensor, max_branching: int,
+             trig_out: tuple[Tensor, Tensor] | None = None,
+             ) -> tuple[Tensor, Tensor, Tensor, Tensor, bool]:  # fmt: skip
     """One step's ``(gestation_q, base_trig, slot_trig, base_now, any_listed)`` of
-    :meth:`~.skill_chaining.SkillChaining.after_transition` (new tensors); ``any_listed``: an
-    event on its agent's list (:func:`event_list`) was triggered, so a creation may follow."""
+    :meth:`~.skill_chaining.SkillChaining.after_transition` (new tensors, or ``trig_out``'s
+    contiguous bool ``(base_trig [P, E], slot_trig [P, K])`` for the triggers); ``any_listed``:
+    an event on its agent's list (:func:`event_list`) was triggered, so a creation may follow."""
     P, K = status.shape
     E = base_now.shape[1]
     parent, target_event, status = (x.contiguous() for x in (parent, target_event, status))
     flags = [_flags(x) for x in (base_now, base_next, contains, contains_next, reached, stepped)]
-    sample = sample.to(torch.float64).contiguous()
-    gestation_q = gestation_q.contiguous()  # held: C reads its address
+    sample = for_c(sample, torch.float64)
+    gestation_q = for_c(gestation_q, torch.float64)  # held: C reads its address
     out_q = torch.empty(P, K, dtype=torch.float64)
-    base_trig, slot_trig = torch.empty(P, E, dtype=torch.bool), torch.empty(P, K, dtype=torch.bool)
+    if trig_out is None:
+        trig_out = (torch.empty(P, E, dtype=torch.bool), torch.empty(P, K, dtype=torch.bool))
+    base_trig, slot_trig = trig_out
     out_base_now = torch.empty(P, E, dtype=torch.bool)
     any_listed = _c.triggers(P, K, E, parent.data_ptr(), target_event.data_ptr(), status.data_ptr(),
                            *(x.data_ptr() for x in flags), sample.data_ptr(),

@@ -134,6 +134,7 @@ class SkillChaining:
         self.log: list[DiscoveryEvent] = []
         self._base_next = self.base_now
         self._exclusion: Tensor | None = None
+        self._buffers_c: dict[str, tuple[Tensor, ...]] = {}  # see _scratch
 
     # ------------------------------------------------------------------ evaluation
     def membership(self, contains: Tensor) -> Tensor:
@@ -191,7 +192,8 @@ class SkillChaining:
                 native_discovery.triggers(bank.parent, bank.target_event, bank.status,
                                           self.base_now, self._base_next, contains,
                                           contains_next, reached, stepped, sample,
-                                          self.gestation_q, self.max_branching))  # fmt: skip
+                                          self.gestation_q, self.max_branching,
+                                          self._scratch("triggers")))  # fmt: skip
             if not any_listed:  # only listed events create
                 return torch.zeros_like(stepped)
             return self._create(base_trig, slot_trig, contains, option, sample)
@@ -215,7 +217,8 @@ class SkillChaining:
         """Examples, refits and dropped updates of the executions that ended."""
         if native_discovery.applies(option, reached):  # the same outcomes, compiled
             slot, success, failure, any_ended, any_failure = native_discovery.outcomes(
-                option, reached, duration, ended, terminated, self.max_option_steps)
+                option, reached, duration, ended, terminated, self.max_option_steps,
+                self._scratch("outcomes"))  # fmt: skip
             if not any_ended:
                 return
         else:
@@ -240,6 +243,19 @@ class SkillChaining:
             self.fitted |= fit
         if any_failure:
             self.trace.drop_updates(slot, failure)
+
+    def _scratch(self, name: str) -> tuple[Tensor, ...]:
+        """Reused CPU arrays for what the compiled outcomes and triggers write and this step
+        reads once (never kept), so they are not allocated every step."""
+        buffers = self._buffers_c.get(name)
+        if buffers is None:
+            P, K, E = self.bank.population, self.bank.slots, self.base_now.shape[1]
+            b = dict(dtype=torch.bool)
+            buffers = ((torch.empty(P, dtype=torch.int64), torch.empty(P, **b),
+                        torch.empty(P, **b)) if name == "outcomes"
+                       else (torch.empty(P, E, **b), torch.empty(P, K, **b)))  # fmt: skip
+            self._buffers_c[name] = buffers
+        return buffers
 
     def _create(self, base_trig: Tensor, slot_trig: Tensor, contains: Tensor, option: Tensor,
                 sample: Tensor) -> Tensor:  # fmt: skip
