@@ -106,8 +106,6 @@ def resolve(bank, native: bool | None, completion_reward, num_primitives: int) -
 # The agent's per-step state, in the order the C step reads and writes it.
 STATE = ("obs", "option_code", "contains", "decision_phi", "decision", "option", "action",
          "decision_return", "duration")
-_OUT = ("q", "d_next", "decision_ended", "option_delta", "smdp_delta", "info_duration",
-        "info_return", "started")
 
 
 def _own(agent, name: str) -> Tensor:
@@ -138,24 +136,23 @@ def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, trun
     columns = agent._code_columns
     next_code = bank.q_head.encode(next_obs) if columns is None else None
     reward, reached = reward.contiguous(), reached.contiguous()
-    f64, b = dict(dtype=torch.float64), dict(dtype=torch.bool)
+    f64 = torch.float64
     # The two large state arrays are updated in place (see the C step); they are the agent's
     # own (every other writer replaces them), so nothing else sees the change. The [P]
     # outputs are rows of three fresh blocks (one allocation per dtype, not one per output).
-    i64_rows = torch.empty(6, P, dtype=torch.int64).unbind(0)
-    f64_rows = torch.empty(4, P, **f64).unbind(0)
-    b_rows = torch.empty(2, P, **b).unbind(0)
-    out = dict(zip(("decision", "option", "action", "duration", "d_next", "info_duration"),
-                   i64_rows))  # fmt: skip
-    out.update(zip(("decision_return", "smdp_delta", "info_return"), f64_rows))
-    out.update(zip(("decision_ended", "started"), b_rows))
-    out.update(obs=torch.empty(P, 4, **f64), option_code=_own(agent, "option_code"),
-               contains=torch.empty(P, K, **b), decision_phi=_own(agent, "decision_phi"),
-               q=torch.empty(P, D, **f64), option_delta=torch.empty(P, K, **f64))
-    value = f64_rows[3] if agent.WANTS_VALUE else None
+    decision, option, action, duration, d_next, info_duration = torch.empty(
+        6, P, dtype=torch.int64).unbind(0)  # fmt: skip
+    decision_return, smdp_delta, info_return, value = torch.empty(4, P, dtype=f64).unbind(0)
+    decision_ended, started = torch.empty(2, P, dtype=torch.bool).unbind(0)
+    q, option_delta = torch.empty(P, D, dtype=f64), torch.empty(P, K, dtype=f64)
+    new_state = (torch.empty(P, 4, dtype=f64), _own(agent, "option_code"),
+                 torch.empty(P, K, dtype=torch.bool), _own(agent, "decision_phi"), decision,
+                 option, action, decision_return, duration)  # STATE's order
+    value = value if agent.WANTS_VALUE else None
+    state = agent.__dict__  # STATE's arrays are plain attributes (HierarchicalAgent._PLAIN)
     step_size, gamma = agent.update.step_size, agent.gamma
     _c.step(P, K, A, F, Fo, head.weight.data_ptr(), bank.q_head.weight.data_ptr(),
-            *(getattr(agent, name).data_ptr() for name in STATE),
+            *[state[name].data_ptr() for name in STATE],
             next_obs.data_ptr(), reward.data_ptr(), terminated.data_ptr(), truncated.data_ptr(),
             stepped.data_ptr(), contains_next.data_ptr(), reached.data_ptr(),
             phi_next.data_ptr(), 0 if next_code is None else next_code.data_ptr(),
@@ -164,14 +161,15 @@ def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, trun
             agent.max_option_steps, bank.q_head.alpha,
             float(agent.option_update.completion_reward), step_size.data_ptr(),
             1 if step_size.ndim else 0, int(OptionStatus.LEARNING),
-            *(out[name].data_ptr() for name in STATE + _OUT),
+            *[x.data_ptr() for x in new_state], q.data_ptr(), d_next.data_ptr(),
+            decision_ended.data_ptr(), option_delta.data_ptr(), smdp_delta.data_ptr(),
+            info_duration.data_ptr(), info_return.data_ptr(), started.data_ptr(),
             0 if value is None else value.data_ptr())  # fmt: skip
-    info = {"decision_ended": out["decision_ended"], "duration": out["info_duration"],
-            "decision_return": out["info_return"], "option_delta": out["option_delta"],
-            "smdp_delta": out["smdp_delta"], "decision": agent.decision,
-            "option": agent.option, "reached": reached}  # fmt: skip
-    # Plain attributes (HierarchicalAgent._PLAIN), set in one call.
-    agent.__dict__.update({name: out[name] for name in STATE}, last_phi=phi_next,
-                          last_q=out["q"], last_value=value)  # fmt: skip
-    agent._options_starting(out["started"])
+    info = {"decision_ended": decision_ended, "duration": info_duration,
+            "decision_return": info_return, "option_delta": option_delta,
+            "smdp_delta": smdp_delta, "decision": state["decision"], "option": state["option"],
+            "reached": reached}  # fmt: skip
+    state.update(zip(STATE, new_state))
+    state.update(last_phi=phi_next, last_q=q, last_value=value)
+    agent._options_starting(started)
     return info
