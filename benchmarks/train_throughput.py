@@ -15,7 +15,7 @@ ratios are ours / peer, measured in the same invocation.
 The skill-chaining rows time agents with options live against flat agents of the same
 population size and the same kind (compiled kernels, the default, or torch only), in
 alternating chunks (``--rounds``), and report the median cost per agent step and its range
-over the rounds.
+over the rounds, and the overall cost (all rounds' time per agent step).
 
 The last line times a whole population run (``--full``: 100 agents x 250 episodes, the paper's
 experiment; default: 100 agents x 5 episodes, said so in the output).
@@ -190,7 +190,7 @@ def main() -> None:
     parser.add_argument("--full", action="store_true", help="time the 100 x 250 run")
     parser.add_argument("--steps", type=int, default=20_000, help="agent steps per row")
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
-    parser.add_argument("--rounds", type=int, default=9,
+    parser.add_argument("--rounds", type=int, default=15,
                         help="alternating flat / skill-chaining chunks per cost row")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -210,11 +210,15 @@ def main() -> None:
               f"{rate / peer:>6.2f} | {rate / torch_rate:>8.2f}")
     print("\nskill chaining with options live (12 slots), alternating with flat agents in the "
           "same process; cost = time per agent step relative to flat agents of the same kind "
-          "(target <= 2.5 at P = 100), median over rounds (range)")
-    print(f"{'P':>5} | {'kind':>10} | {'flat':>10} | {'skill ch.':>9} | {'cost':>18}")
-    print(f"{'-' * 5}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 9}-|-{'-' * 18}")
+          "(target <= 2.5 at P = 100): median over rounds (range), and overall (all rounds' "
+          "time per step)")
+    print(f"{'P':>5} | {'kind':>10} | {'flat':>10} | {'skill ch.':>9} | {'cost':>18} | "
+          f"{'overall':>7}")
+    print(f"{'-' * 5}-|-{'-' * 10}-|-{'-' * 10}-|-{'-' * 9}-|-{'-' * 18}-|-{'-' * 7}")
     for population in (1, 100):
-        flat_steps, options_steps = (1_500, 300) if population == 1 else (10_000, 5_000)
+        # Chunks of a few hundred steps: shorter ones swing with the bursts of refits and
+        # episode ends (a 50-step chunk ranged over 1.3-5.0x).
+        flat_steps, options_steps = (3_000, 1_500) if population == 1 else (30_000, 15_000)
         scale = args.steps / 20_000
         rates = paired_cost(population, args.threads, args.rounds,
                             max(1, int(flat_steps * scale)),
@@ -223,8 +227,10 @@ def main() -> None:
             flat, options = rates[f"flat_{kind}"], rates[f"sc_{kind}"]
             costs = [f / o for f, o in zip(flat, options)]
             cell = f"{statistics.median(costs):.2f} ({min(costs):.2f}-{max(costs):.2f})"
+            # every round times the same number of steps of each: mean times per step
+            overall = sum(1 / o for o in options) / sum(1 / f for f in flat)
             print(f"{population:>5} | {label:>10} | {statistics.median(flat):>10,.0f} | "
-                  f"{statistics.median(options):>9,.0f} | {cell:>18}")
+                  f"{statistics.median(options):>9,.0f} | {cell:>18} | {overall:>7.2f}")
     runs, episodes = (100, 250) if args.full else (100, 5)
     wall, steps = time_population_run(runs, episodes, args.threads)
     note = "" if args.full else " (short version; --full times the paper's 100 x 250)"
