@@ -47,15 +47,18 @@ NATIVE_CLONES static int64_t choose_row(const double *w, const double *phi, cons
 }
 
 /* The primitive action: min(decision, A - 1), or option `option`'s epsilon-greedy action by
- * its values w_opt[option, a] . code. */
+ * its values w_opt[option, a] . code. `known` (or NULL): those values for every action but
+ * `stale`, already computed from the same weights and code (the step's intra-option update
+ * of this option valued s' before changing row `stale` alone), so only that row is redone. */
 NATIVE_CLONES static int64_t act_row(const double *w_opt, const double *code, int64_t decision,
                        int64_t option, Py_ssize_t A, Py_ssize_t Fo, double epsilon,
-                       const double *u)
+                       const double *u, const double *known, int64_t stale)
 {
     double q[MAX_CHOICES];
     if (option < 0) return decision < A - 1 ? decision : A - 1;
     const double *wk = w_opt + option * A * Fo;
-    for (Py_ssize_t a = 0; a < A; a++) q[a] = dot(wk + a * Fo, code, Fo);
+    for (Py_ssize_t a = 0; a < A; a++)
+        q[a] = known && a != stale ? known[a] : dot(wk + a * Fo, code, Fo);
     return epsilon_greedy(q, NULL, A, epsilon, u[0], u[1]);
 }
 
@@ -75,14 +78,16 @@ NATIVE_CLONES static double smdp_row(double *wd, const double *phi, Py_ssize_t F
 
 /* Intra-option Q-learning of one option (weights wk [A, Fo]) from (s, a, r, s'):
  * target = (r + C [reached]) + gamma max_b wk[b] . x1 [neither reached nor terminated],
- * delta = target - wk[a] . x, wk[a] += (alpha delta) x. */
+ * delta = target - wk[a] . x, wk[a] += (alpha delta) x. The values wk[b] . x1 go to q [A]
+ * when computed (returns them in *valued = 1; the update then changes only q[a]'s row). */
 NATIVE_CLONES static double intra_row(double *wk, const double *x, const double *x1, int64_t a, double r,
                         int reached, int terminated, Py_ssize_t A, Py_ssize_t Fo, double alpha,
-                        double gamma, double completion)
+                        double gamma, double completion, double *q, int *valued)
 {
-    double q[MAX_CHOICES];
     double boot = 0.0;
+    *valued = 0;
     if (!reached && !terminated) {
+        *valued = 1;
         for (Py_ssize_t b = 0; b < A; b++) q[b] = dot(wk + b * Fo, x1, Fo);
         boot = gamma * masked_max(q, NULL, A);
     }
@@ -142,7 +147,7 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
     for (Py_ssize_t p = 0; p < P; p++)
         if (rows[p])
             action[p] = act_row(w + p * K * A * Fo, code + p * Fo, decision[p], option[p], A,
-                                Fo, epsilon, u + p * u_stride);
+                                Fo, epsilon, u + p * u_stride, NULL, 0);
     Py_RETURN_NONE;
 }
 
@@ -230,13 +235,19 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         const uint8_t *reach = reached + p * K, *in_next = contains_next + p * K;
         double r = go ? reward[p] : 0.0;
 
-        /* Intra-option Q-learning: every live option whose initiation set holds s. */
+        /* Intra-option Q-learning: every live option whose initiation set holds s. The
+         * executing option's values at s' are kept for its next action (act_row). */
+        double q_exec[MAX_CHOICES], q_other[MAX_CHOICES];
+        int exec_valued = 0;
         for (Py_ssize_t k = 0; k < K; k++) {
             Py_ssize_t s = p * K + k;
+            int valued = 0;
             option_delta[s] = go && contains[s] && st[k] != 0
                 ? intra_row(w_opt + s * A * Fo, x, x1, action[p], r, reach[k], term, A, Fo,
-                            alpha_o, gamma, completion)
+                            alpha_o, gamma, completion, k == option[p] ? q_exec : q_other,
+                            &valued)
                 : 0.0;
+            if (k == option[p]) exec_valued = valued;
         }
 
         /* The decision in force accumulates the (discounted) reward; has it ended? */
@@ -282,8 +293,11 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         out_decision[p] = dec;
         out_option[p] = opt;
         started[p] = (uint8_t)(fresh && dn >= A);
+        /* The same option going on from s' (code x1): its values were taken above. */
+        int reuse = exec_valued && !fresh && opt == option[p];
         out_action[p] = go && !ended
-            ? act_row(w_opt + p * K * A * Fo, c_new, dec, opt, A, Fo, option_epsilon, up + 2)
+            ? act_row(w_opt + p * K * A * Fo, c_new, dec, opt, A, Fo, option_epsilon, up + 2,
+                      reuse ? q_exec : NULL, action[p])
             : action[p];
         if (value)
             value[p] = !go      ? 0.0
