@@ -84,7 +84,7 @@ class SkillChainingAgent(HierarchicalAgent):
         # (before that step's update): the samples of gestation.
         self.q_decision = torch.zeros(self.population, dtype=torch.float64,
                                       device=self.obs.device)  # fmt: skip
-        self._starts = torch.zeros_like(self.active)
+        self._starts: Tensor | None = None  # agents whose option started this step, if any
 
     @classmethod
     def build(cls, population: int, slots: int = 12, order: int = 4, option_order: int = 3,
@@ -118,11 +118,12 @@ class SkillChainingAgent(HierarchicalAgent):
 
     def _options_starting(self, rows: Tensor) -> None:
         # Snapshots wait until the step's updates (and any dropped ones) are done.
-        self._starts = self._starts | rows
+        self._starts = rows if self._starts is None else self._starts | rows
 
     def _begin_executions(self) -> None:
-        self.discovery.start_executions(self._starts, self.option)
-        self._starts = torch.zeros_like(self._starts)
+        if self._starts is not None:
+            self.discovery.start_executions(self._starts, self.option)
+            self._starts = None
 
     def transition(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
                    truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:  # fmt: skip

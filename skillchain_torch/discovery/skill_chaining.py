@@ -158,12 +158,13 @@ class SkillChaining:
     # ------------------------------------------------------------------ per step
     def record(self, executing: Tensor, step: Tensor, obs: Tensor) -> None:
         """Before a transition: executing agents act in ``obs`` as step ``step`` of it."""
-        if bool(executing.any()):
+        # (The compiled trace skips rows itself: no any(), which waits on the flags.)
+        if native_discovery.applies(executing) or bool(executing.any()):
             self.trace.record(executing, step, obs)
 
     def start_executions(self, rows: Tensor, slot: Tensor) -> None:
         """Agents ``rows [P]`` start executing ``slot [P]`` (after this step's updates)."""
-        if bool(rows.any()):
+        if native_discovery.applies(rows) or bool(rows.any()):
             self.trace.start(rows, slot)
 
     def after_transition(self, *, contains: Tensor, option: Tensor, value: Tensor,
