@@ -397,3 +397,32 @@ def test_option_code_is_picked_from_the_top_level_features_bit_for_bit(top, inne
         return
     obs = torch.rand(50, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(top))
     assert torch.equal(basis(obs)[:, columns], head.basis(obs))
+
+
+@pytest.mark.parametrize("native", [False, None])
+def test_episode_start_encodes_only_the_starting_rows(native):
+    """A restart (observe_ends) gives the starting agent the features of its start state and a
+    fresh decision, and leaves the other agents as a step without restarts would."""
+    P = 3
+    agents = [make_agent(make_bank(population=P, order=3), order=4, native=native)
+              for _ in range(2)]  # fmt: skip
+    start = obs((0.2, 0.3, 0.5, 0.5), (0.6, 0.7, 0.5, 0.5), (0.4, 0.8, 0.5, 0.5))
+    later = obs((0.25, 0.3, 0.5, 0.5), (0.65, 0.7, 0.5, 0.5), (0.45, 0.8, 0.5, 0.5))
+    restart = obs((0.8, 0.1, 0.5, 0.5))
+    reward = torch.full((P,), -1.0, dtype=F64)
+    ended = torch.tensor([False, True, False])
+    for agent in agents:
+        agent.begin(start)
+    agents[0].observe_ends(later, reward, ended, torch.zeros_like(ended), torch.tensor([1]),
+                           restart)  # fmt: skip
+    agents[1].observe_ends(later, reward, ended, torch.zeros_like(ended),
+                           torch.zeros(0, dtype=torch.int64), None)  # fmt: skip
+    restarted, plain = agents
+    expected = restarted.features(restart)[0]
+    assert torch.equal(restarted.decision_phi[1], expected)  # the start state's features
+    assert torch.equal(restarted.option_code[1], restarted._encode(restart)[1][0])
+    assert torch.equal(restarted.obs[1], restart[0]) and int(restarted.duration[1]) == 0
+    for name in ("obs", "decision_phi", "option_code", "decision", "option", "duration"):
+        mine, theirs = getattr(restarted, name), getattr(plain, name)
+        assert torch.equal(mine[[0, 2]], theirs[[0, 2]]), name  # the others untouched
+    assert not torch.equal(restarted.decision_phi[1], plain.decision_phi[1])
