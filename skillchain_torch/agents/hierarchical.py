@@ -240,24 +240,19 @@ class HierarchicalAgent(nn.Module):
         """``[P, K]``: each live option's termination predicate (target event) at ``s'``."""
         return self.bank.target_reached(next_obs, terminated, self.events, contains=contains)
 
-    def _encode(self, obs: Tensor) -> tuple[Tensor, Tensor]:
-        """``(phi(s), option code of s)``: the top-level features and the option heads' code.
+    def _encode(self, obs: Tensor, index: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """``(phi(s), option code of s)``: the top-level features and the option heads' code
+        (of the rows ``index`` of ``obs [P, 4]`` only, when given: ``[len(index), .]``).
 
         When the option heads use a Fourier basis of the same observation and no higher order
         (the paper: order 3 under order 4), their features are columns of the top level's,
         computed with the same arithmetic (see :func:`shared_fourier_columns`), so they are
         picked rather than computed again."""
-        phi = self.features(obs)
-        if self._code_columns is None:
-            return phi, self.bank.q_head.encode(obs)
-        return phi, phi[:, self._code_columns]
-
-    def _encode_rows(self, obs: Tensor, index: Tensor) -> tuple[Tensor, Tensor]:
-        """:meth:`_encode` of the rows ``index`` of ``obs [P, 4]`` only: ``[len(index), .]``."""
-        phi = self.features(obs[index])
-        if self._code_columns is None:  # a head's code may need every row (its shape check)
-            return phi, self.bank.q_head.encode(obs)[index]
-        return phi, phi[:, self._code_columns]
+        phi = self.features(obs if index is None else obs[index])
+        if self._code_columns is not None:
+            return phi, phi[:, self._code_columns]
+        code = self.bank.q_head.encode(obs)  # a head's code may need every row (its checks)
+        return phi, code if index is None else code[index]
 
     def _choose(self, obs: Tensor, phi: Tensor, contains: Tensor, uniforms: Tensor,
                 rows: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
@@ -313,7 +308,7 @@ class HierarchicalAgent(nn.Module):
         obs = torch.where(rows[:, None], obs, self.obs)
         contains = self.membership(obs)
         index = rows.nonzero()[:, 0]
-        phi_rows, code_rows = self._encode_rows(obs, index)
+        phi_rows, code_rows = self._encode(obs, index)
         phi = obs.new_zeros(self.population, phi_rows.shape[1])
         phi[index] = phi_rows
         phi, decision = self._choose(obs, phi, contains, u[:, :2], rows=rows)
@@ -412,15 +407,18 @@ class HierarchicalAgent(nn.Module):
         self._act(continuing, u[:, 2:])
         return info
 
+    def all_active(self) -> bool:
+        """Every agent is active: rows are agents (a check without a call into torch)."""
+        return self._index.numel() == self.population
+
     def all_stepped(self, stepped: Tensor) -> bool:
         """``stepped`` is the agent's own ``active`` mask with every agent active (what
-        :meth:`observe` passes): per-row masking by it changes nothing, so it can be skipped
-        (a check without a call into torch)."""
-        return stepped is self.active and self._index.numel() == self.population
+        :meth:`observe` passes): per-row masking by it changes nothing, so it can be skipped."""
+        return stepped is self.active and self.all_active()
 
     # ------------------------------------------------------------------ protocol
     def _full(self, rows_value: Tensor, fill: Tensor) -> Tensor:
-        if self._index.numel() == self.population:  # every agent active: rows are agents
+        if self.all_active():  # rows are agents
             return rows_value if rows_value.dtype == fill.dtype else rows_value.to(fill.dtype)
         out = fill.clone()
         out[self._index] = rows_value if rows_value.dtype == out.dtype else rows_value.to(out.dtype)
@@ -475,7 +473,7 @@ class HierarchicalAgent(nn.Module):
     @property
     def actions(self) -> Tensor:
         """The primitive action of each active row ``[n]``."""
-        if self._index.numel() == self.population:  # (action is replaced, never written)
+        if self.all_active():  # (action is replaced, never written)
             return self.action
         return self.action[self._index]
 

@@ -134,7 +134,12 @@ class SkillChaining:
         self.log: list[DiscoveryEvent] = []
         self._base_next = self.base_now
         self._exclusion: Tensor | None = None
-        self._buffers_c: dict[str, tuple[Tensor, ...]] = {}  # see _scratch
+        # Reused CPU arrays for what the compiled outcomes and triggers write and the step
+        # reads once (never kept), so they are not allocated every step.
+        b = dict(dtype=torch.bool)
+        self._outcomes_out = (torch.empty(P, dtype=torch.int64), torch.empty(P, **b),
+                              torch.empty(P, **b))  # fmt: skip
+        self._triggers_out = (torch.empty(P, E, **b), torch.empty(P, K, **b))
 
     # ------------------------------------------------------------------ evaluation
     def membership(self, contains: Tensor) -> Tensor:
@@ -158,14 +163,11 @@ class SkillChaining:
     # ------------------------------------------------------------------ per step
     def record(self, executing: Tensor, step: Tensor, obs: Tensor) -> None:
         """Before a transition: executing agents act in ``obs`` as step ``step`` of it."""
-        # (The compiled trace skips rows itself: no any(), which waits on the flags.)
-        if native_discovery.applies(executing) or bool(executing.any()):
-            self.trace.record(executing, step, obs)
+        self.trace.record(executing, step, obs)  # (rows outside executing are skipped)
 
     def start_executions(self, rows: Tensor, slot: Tensor) -> None:
         """Agents ``rows [P]`` start executing ``slot [P]`` (after this step's updates)."""
-        if native_discovery.applies(rows) or bool(rows.any()):
-            self.trace.start(rows, slot)
+        self.trace.start(rows, slot)  # (nothing when no row starts)
 
     def after_transition(self, *, contains: Tensor, option: Tensor, value: Tensor,
                          contains_next: Tensor, reached: Tensor, duration: Tensor,
@@ -194,7 +196,7 @@ class SkillChaining:
                                           self.base_now, self._base_next, contains,
                                           contains_next, reached, stepped, sample,
                                           self.gestation_q, self.max_branching,
-                                          self._scratch("triggers")))  # fmt: skip
+                                          self._triggers_out))  # fmt: skip
             if not any_listed:  # only listed events create
                 return torch.zeros_like(stepped)
             return self._create(base_trig, slot_trig, contains, option, sample)
@@ -219,7 +221,7 @@ class SkillChaining:
         if native_discovery.applies(option, reached):  # the same outcomes, compiled
             slot, success, failure, any_ended, any_failure = native_discovery.outcomes(
                 option, reached, duration, ended, terminated, self.max_option_steps,
-                self._scratch("outcomes"))  # fmt: skip
+                self._outcomes_out)  # fmt: skip
             if not any_ended:
                 return
         else:
@@ -244,19 +246,6 @@ class SkillChaining:
             self.fitted |= fit
         if any_failure:
             self.trace.drop_updates(slot, failure)
-
-    def _scratch(self, name: str) -> tuple[Tensor, ...]:
-        """Reused CPU arrays for what the compiled outcomes and triggers write and this step
-        reads once (never kept), so they are not allocated every step."""
-        buffers = self._buffers_c.get(name)
-        if buffers is None:
-            P, K, E = self.bank.population, self.bank.slots, self.base_now.shape[1]
-            b = dict(dtype=torch.bool)
-            buffers = ((torch.empty(P, dtype=torch.int64), torch.empty(P, **b),
-                        torch.empty(P, **b)) if name == "outcomes"
-                       else (torch.empty(P, E, **b), torch.empty(P, K, **b)))  # fmt: skip
-            self._buffers_c[name] = buffers
-        return buffers
 
     def _create(self, base_trig: Tensor, slot_trig: Tensor, contains: Tensor, option: Tensor,
                 sample: Tensor) -> Tensor:  # fmt: skip
