@@ -37,6 +37,7 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.features import PolynomialFeatures
+from skillchain_torch.native import for_c
 from skillchain_torch.options.examples import RESERVOIR_STREAM
 from skillchain_torch.options.logistic import sweep_terms
 
@@ -126,6 +127,8 @@ def store_executions(classifier, states: Tensor, slot: Tensor, duration: Tensor,
     ``duration`` states ``[P, T, 4]`` of a success, the first of a failure) stored in slot
     ``slot [P]`` of each agent, marking ``touched [P, K]``; the number of examples."""
     P, K, C = classifier.labels.shape
+    slot, duration = for_c(slot, torch.int64), for_c(duration, torch.int64)
+    success, failure = for_c(success, torch.bool), for_c(failure, torch.bool)
     return _c.store_executions(P, K, C, states.shape[1], states.data_ptr(), slot.data_ptr(),
                                duration.data_ptr(), success.data_ptr(), failure.data_ptr(),
                                *_stores(classifier, touched))  # fmt: skip
