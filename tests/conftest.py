@@ -1,5 +1,7 @@
 """Shared test fixtures: headless plotting and the shared reference data."""
 
+import os
+import subprocess
 from pathlib import Path
 
 import matplotlib
@@ -8,12 +10,30 @@ import pytest
 matplotlib.use("Agg")
 
 
+def _origin() -> Path | None:
+    """The checkout this one was cloned from, when that is a local path (a scratch clone of a
+    checkout that sits beside shared/)."""
+    try:
+        url = subprocess.run(["git", "config", "--get", "remote.origin.url"],
+                             cwd=Path(__file__).parent, capture_output=True, text=True,
+                             timeout=10).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return Path(url).resolve() if url and Path(url).is_dir() else None
+
+
 def _find_shared() -> Path:
-    for parent in Path(__file__).resolve().parents:
+    """shared/pinball: $SKILLCHAIN_SHARED, else above the tests, else above the local origin."""
+    if os.environ.get("SKILLCHAIN_SHARED"):
+        return Path(os.environ["SKILLCHAIN_SHARED"]) / "pinball"
+    origin = _origin()
+    roots = [*Path(__file__).resolve().parents, *([origin, *origin.parents] if origin else [])]
+    for parent in roots:
         candidate = parent / "shared" / "pinball"
         if candidate.is_dir():
             return candidate
-    raise FileNotFoundError("shared/pinball (reference vectors) not found above the tests")
+    raise FileNotFoundError("shared/pinball (reference vectors) not found above the tests or "
+                            "their local origin; set SKILLCHAIN_SHARED to the shared/ folder")
 
 
 @pytest.fixture(scope="session")

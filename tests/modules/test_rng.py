@@ -1,7 +1,6 @@
 """Counter-based random streams: SplitMix64 bits, the Java reference actions, per-agent streams."""
 
 import doctest
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -39,14 +38,6 @@ def to_signed(u: int) -> int:
     return u - 2**64 if u >= 2**63 else u
 
 
-def vectors_dir() -> Path:
-    for parent in Path(__file__).resolve().parents:
-        candidate = parent / "shared" / "pinball" / "vectors"
-        if candidate.is_dir():
-            return candidate
-    raise FileNotFoundError("shared/pinball/vectors not found in any parent of this test")
-
-
 def test_doctests():
     for module in (skillchain_torch.rng, skillchain_torch.invariant):
         assert doctest.testmod(module).failed == 0
@@ -73,8 +64,8 @@ def test_seed_zero_starts_with_actions_1_2():
     assert java_actions(0, 2) == [1, 2]
 
 
-def test_regenerates_java_reference_actions():
-    files = sorted(vectors_dir().glob("*_uniform_*.npz"))
+def test_regenerates_java_reference_actions(vectors_dir):
+    files = sorted(vectors_dir.glob("*_uniform_*.npz"))
     assert len(files) == 4
     seeds, actions = [], []
     for path in files:
