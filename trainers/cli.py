@@ -61,6 +61,10 @@ CONFIG_OPTIONS = (
     "slots",
     "initiation_bias",
     "initiation_centered",
+    "gestation_positives",
+    "initiation_start",
+    "initiation_constrain",
+    "one_class_fits",
 )
 
 
@@ -146,6 +150,36 @@ def build_parser() -> argparse.ArgumentParser:
         help="initiation classifiers on features of 2s-1 instead of s",
     )
     train.add_argument(
+        "--gestation-positives",
+        type=int,
+        default=None,
+        metavar="N",
+        help="reading: each time a gestating option's target fires, the last N states of the "
+        "trajectory become positive examples (0: none; 250: the paper's 'within 250 steps')",
+    )
+    train.add_argument(
+        "--initiation-start",
+        choices=("everything", "biased", "fitted"),
+        default=None,
+        help="reading: the initiation set when gestation ends: true everywhere, true through "
+        "--initiation-bias, or fitted on the gestation positives",
+    )
+    train.add_argument(
+        "--initiation-constrain",
+        choices=("learned", "start"),
+        default=None,
+        help="reading: the 0.1 distance constraint once the set is learned, or from the end "
+        "of gestation",
+    )
+    train.add_argument(
+        "--wait-for-both-classes",
+        dest="one_class_fits",
+        action="store_const",
+        const=False,
+        default=None,
+        help="reading: fit an initiation set only once it holds both classes",
+    )
+    train.add_argument(
         "--checkpoint-every",
         type=int,
         default=None,
@@ -175,8 +209,54 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     summary = sub.add_parser("summarize", help="print the returns table of a finished run")
     summary.add_argument("dir", type=Path, help="run directory")
-    parser.commands = {"train": train, "summarize": summary}
+    reproduce = sub.add_parser(
+        "reproduce",
+        help="run the paper's experiments and write their figures and report",
+        description="Run the paper's experiments (flat, skill chaining and given options on "
+        "both Pinball instances), then write the figures (4a-8) and DIR/README.md. Resumable: "
+        "run it again to finish an interrupted study.",
+    )
+    reproduce.add_argument("what", choices=("paper",), help="the study to reproduce")
+    reproduce.add_argument("--out", type=Path, required=True, help="output directory")
+    reproduce.add_argument("--runs", type=_positive, default=100,
+                           help="runs per agent on the first instance (default 100)")
+    reproduce.add_argument("--episodes", type=_positive, default=250,
+                           help="episodes per run (default 250)")
+    reproduce.add_argument("--hard-runs", type=_positive, default=30,
+                           help="runs per agent on the second instance (default 30)")
+    reproduce.add_argument("--hard-episodes", type=_positive, default=None,
+                           help="episodes per run on the second instance (default: --episodes)")
+    reproduce.add_argument("--seed", type=int, default=1000,
+                           help="agent p of every kind uses seed + p (default 1000)")
+    reproduce.add_argument("--instances", nargs="+", choices=("simple", "hard"),
+                           default=["simple", "hard"], help="which instances (default both)")
+    reproduce.add_argument("--jobs", type=_positive, default=2,
+                           help="runs in parallel, one process each (default 2)")
+    reproduce.add_argument("--report-only", action="store_true",
+                           help="write the report and figures from the finished runs only")
+    reproduce.add_argument("--quiet", action="store_true", help="no progress bar")
+    verify = sub.add_parser(
+        "verify",
+        help="re-run agents of a finished run alone and compare them bit for bit",
+        description="Re-run the given agents of RUN_DIR one at a time from its config.json and "
+        "compare their returns and lengths with the run's arrays bit for bit. Exit 0 only if "
+        "every agent matches.",
+    )
+    verify.add_argument("dir", type=Path, help="run directory")
+    verify.add_argument("--agents", type=int, nargs="+", required=True, help="agent indices")
+    parser.commands = {"train": train, "summarize": summary, "reproduce": reproduce,
+                       "verify": verify}
     return parser
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
 
 
 def _options_agent(text: str):
@@ -202,7 +282,46 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as err:
             command.error(str(err))
         return 0
+    if args.command == "reproduce":
+        return _reproduce(command, args)
+    if args.command == "verify":
+        return _verify(command, args)
     return _train(command, args)
+
+
+def _reproduce(parser, args) -> int:
+    from .reproduce import reproduce_paper
+
+    try:
+        if args.report_only:
+            from .paper_report import write_report
+
+            path = write_report(args.out, quiet=args.quiet)
+        else:
+            path = reproduce_paper(args.out, runs=args.runs, episodes=args.episodes,
+                                   hard_runs=args.hard_runs, hard_episodes=args.hard_episodes,
+                                   seed=args.seed, jobs=args.jobs, instances=args.instances,
+                                   quiet=args.quiet)  # fmt: skip
+    except (ValueError, RuntimeError) as err:
+        parser.error(str(err))
+    except KeyboardInterrupt:
+        print("\ninterrupted; continue with the same command", file=sys.stderr)
+        return 130
+    print(f"report: {path}")
+    return 0
+
+
+def _verify(parser, args) -> int:
+    from .verify import verify_run
+
+    try:
+        results = verify_run(args.dir, args.agents, progress=True)
+    except ValueError as err:
+        parser.error(str(err))
+    ok = all(r["match"] for r in results)
+    print(f"{args.dir}: {'match' if ok else 'MISMATCH'} "
+          f"({sum(r['match'] for r in results)} of {len(results)} agents identical)")
+    return 0 if ok else 1
 
 
 def _config_from_args(parser, args) -> TrainConfig:
@@ -322,6 +441,7 @@ def _run(trainer, out: Path, quiet: bool) -> int:
         "threads": trainer.num_threads,
         "compiled_agent": bool(getattr(trainer.agent, "native", False)),
         "machine": platform.processor() or platform.machine(),
+        "commit": source_commit(),
     }
     (out / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")
     if not quiet:
@@ -333,6 +453,24 @@ def _run(trainer, out: Path, quiet: bool) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def source_commit() -> str | None:
+    """The git commit of the installed source (``+dirty`` when it has uncommitted changes),
+    or ``None`` outside a git checkout: recorded in ``run_info.json`` so a published run says
+    which code made it."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
+                              text=True, timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--",
+                                "skillchain_torch", "envs", "trainers"], capture_output=True,
+                               text=True, timeout=10, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return head + ("+dirty" if dirty else "")
 
 
 def _write_discovery(trainer, discovery, out: Path) -> None:

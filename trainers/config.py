@@ -25,6 +25,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from skillchain_torch.discovery.readings import DEFAULT_READING as _DEFAULT
+from skillchain_torch.discovery.readings import InitiationReading
+
 __all__ = ["TrainConfig", "paper_defaults", "RESUME_FIELDS"]
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
@@ -64,6 +67,11 @@ class TrainConfig:
         initiation_bias, initiation_centered: the initiation classifiers' ``initial_bias``
             and ``centered`` (see :class:`~skillchain_torch.options.InitiationClassifier`);
             the defaults, 0 and False, are the reading the first results used.
+        gestation_positives, initiation_start, initiation_constrain, one_class_fits: the
+            initiation-set reading of skill chaining (see
+            :class:`~skillchain_torch.discovery.InitiationReading`); the defaults are
+            :data:`~skillchain_torch.discovery.DEFAULT_READING` (the first reading; see
+            ``results/screening/README.md``).
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -87,6 +95,16 @@ class TrainConfig:
     slots: int = 12
     initiation_bias: float = 0.0
     initiation_centered: bool = False
+    gestation_positives: int = _DEFAULT.gestation_positives
+    initiation_start: str = _DEFAULT.start
+    initiation_constrain: str = _DEFAULT.constrain
+    one_class_fits: bool = _DEFAULT.one_class_fits
+
+    @property
+    def reading(self):
+        """The :class:`~skillchain_torch.discovery.InitiationReading` of these fields."""
+        return InitiationReading(self.gestation_positives, self.initiation_start,
+                                 self.initiation_constrain, self.one_class_fits)
 
     def resolved(self) -> TrainConfig:
         """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``)."""
@@ -137,6 +155,15 @@ class TrainConfig:
         for name, value, ok, rule in checks:
             if not ok:
                 raise ValueError(f"{name} must be {rule}, got {value}")
+        try:
+            reading = self.reading
+        except ValueError as err:
+            raise ValueError(str(err).replace("reading start", "initiation_start").replace(
+                "reading constrain", "initiation_constrain").replace(
+                "reading gestation_positives", "gestation_positives")) from None
+        if reading.start == "biased" and not self.initiation_bias > 0:
+            raise ValueError(f"initiation_start 'biased' needs initiation_bias > 0, got "
+                             f"{self.initiation_bias}")  # fmt: skip
         return self
 
     def to_dict(self) -> dict[str, Any]:

@@ -42,5 +42,6 @@ class SkillChainingRunAgent(SkillChainingAgent):
                                 centered=cfg.initiation_centered)  # fmt: skip
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
-                         scale_step_size=cfg.scale_step_size, device=device, native=native)
+                         scale_step_size=cfg.scale_step_size, device=device, native=native,
+                         reading=cfg.reading)
         self.config = cfg

@@ -210,7 +210,7 @@ class HierarchicalAgent(nn.Module):
     # parameters, buffers and submodules) costs more than the tensor maths for these.
     _PLAIN = frozenset({"obs", "contains", "decision_phi", "decision", "option", "action",
                         "decision_return", "duration", "active", "option_code", "last_q",
-                        "last_phi", "last_value", "_index"})  # fmt: skip
+                        "last_phi", "last_value", "_index", "_raw_contains"})  # fmt: skip
     # The compiled transition also returns Q(s', d) of the decision in force (last_value).
     WANTS_VALUE = False
 
@@ -232,13 +232,18 @@ class HierarchicalAgent(nn.Module):
         """``[P, K]``: which initiation sets hold ``obs [P, 4]`` (one classifier evaluation per
         visited state; skill chaining narrows it by its overlap rule)."""
         contains = self.bank.classifier.contains(obs)
+        self._raw_contains = contains  # the classifiers' own sets: the targets of chained options
         if self._exclusion is None:
             return contains
         return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
 
     def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
-        """``[P, K]``: each live option's termination predicate (target event) at ``s'``."""
-        return self.bank.target_reached(next_obs, terminated, self.events, contains=contains)
+        """``[P, K]``: each live option's termination predicate (target event) at ``s'``.
+
+        A chained option's target is its parent's own initiation set (the classifier's, as in
+        discovery), not the parent's set narrowed by the no-overlap rule."""
+        raw = contains if self._exclusion is None else self._raw_contains
+        return self.bank.target_reached(next_obs, terminated, self.events, contains=raw)
 
     def _encode(self, obs: Tensor, index: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """``(phi(s), option code of s)``: the top-level features and the option heads' code

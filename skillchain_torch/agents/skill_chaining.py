@@ -39,8 +39,10 @@ from skillchain_torch.discovery import (
     CONVERGENCE_THRESHOLD,
     GESTATION_EPISODES,
     MAX_BRANCHING,
+    InitiationReading,
     SkillChaining,
 )
+from skillchain_torch.discovery.readings import FIRST_READING
 from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 
 from .hierarchical import MAX_OPTION_STEPS, HierarchicalAgent, as_bool
@@ -57,6 +59,8 @@ class SkillChainingAgent(HierarchicalAgent):
         gestation, max_branching, convergence_threshold, convergence_episodes, overlap,
             wait_for_both_classes: the discovery rules (paper: 10, 3, 0.15, 2, on, off); see
             :class:`~skillchain_torch.discovery.SkillChaining`.
+        reading: the initiation-set reading (:class:`~skillchain_torch.discovery.
+            InitiationReading`; default the first one, true everywhere until the first fit).
         **kwargs: the :class:`HierarchicalAgent` arguments (``order``, ``alpha``, ``gamma``,
             ``epsilon``, ``seed``, ``option_epsilon``, ``max_option_steps``, ...).
 
@@ -71,14 +75,15 @@ class SkillChainingAgent(HierarchicalAgent):
                  gestation: int = GESTATION_EPISODES, max_branching: int = MAX_BRANCHING,
                  convergence_threshold: float = CONVERGENCE_THRESHOLD,
                  convergence_episodes: int = CONVERGENCE_EPISODES, overlap: bool = True,
-                 wait_for_both_classes: bool = False, **kwargs):  # fmt: skip
+                 wait_for_both_classes: bool = False,
+                 reading: InitiationReading = FIRST_READING, **kwargs):  # fmt: skip
         super().__init__(bank, events=events, **kwargs)
         self.discovery = SkillChaining(
             self.bank, self.events, gestation=gestation, max_branching=max_branching,
             convergence_threshold=convergence_threshold,
             convergence_episodes=convergence_episodes,
             max_option_steps=kwargs.get("max_option_steps", MAX_OPTION_STEPS), overlap=overlap,
-            wait_for_both_classes=wait_for_both_classes,
+            wait_for_both_classes=wait_for_both_classes, reading=reading,
         )  # fmt: skip
         # Q(s, d) of the decision d in force at the current state s, valued when s was reached
         # (before that step's update): the samples of gestation.
@@ -107,7 +112,9 @@ class SkillChainingAgent(HierarchicalAgent):
         return self.discovery.membership(self.bank.classifier.contains(obs))
 
     def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
-        return self.discovery.targets(next_obs, terminated, contains)
+        # Targets are the classifiers' own sets at s' (kept by membership), not the effective
+        # ones in ``contains`` (see SkillChaining.membership).
+        return self.discovery.targets(next_obs, terminated, self.discovery.last_raw)
 
     def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
         super()._start_decisions(obs, rows)
@@ -130,6 +137,7 @@ class SkillChainingAgent(HierarchicalAgent):
         contains, option, value = self.contains, self.option, self.q_decision
         every = self.all_stepped(stepped)  # masks by stepped are then skipped
         executing = option >= 0
+        self.discovery.record_states(stepped, self.obs)
         self.discovery.record(executing if every else stepped & executing, self.duration,
                               self.obs)  # fmt: skip
         info = super().transition(next_obs, reward, terminated, truncated, stepped)
@@ -143,6 +151,7 @@ class SkillChainingAgent(HierarchicalAgent):
         if bool(created.any()):  # the new slot changes the memberships at s'
             self.contains = torch.where(created[:, None], self.membership(self.obs),
                                         self.contains)  # fmt: skip
+            self.discovery.created_rows_evaluated(created)
         # New decisions were valued before this step's update; an agent going on with its
         # option had no update this step, so its value now is the value then.
         if self.native:  # the compiled transition valued them (the same rule)

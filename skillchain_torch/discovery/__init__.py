@@ -12,6 +12,8 @@ Each rule is a named piece with the paper's value as its default:
   dropped updates of failed ones.
 - :mod:`.convergence`: learned when the classifier moved less than 0.15 in two episodes.
 - :mod:`.overlap`: an option's set stays out of its parent's and its older siblings'.
+- :mod:`.readings`: the readings of what the paper leaves open about initiation sets
+  (gestation positives, the set when gestation ends, when the distance constraint applies).
 - :class:`SkillChaining`: the state of a population's discovery, applying all of the above.
 """
 
@@ -32,16 +34,26 @@ from skillchain_torch.discovery.events import (
 from skillchain_torch.discovery.executions import ExecutionTrace, execution_outcome
 from skillchain_torch.discovery.gestation import (
     GESTATION_EPISODES,
+    RecentStates,
     gestation_over,
     initialise_option_values,
 )
 from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion
+from skillchain_torch.discovery.readings import (
+    DEFAULT_READING,
+    FIRST_READING,
+    InitiationReading,
+)
 from skillchain_torch.discovery.skill_chaining import DiscoveryEvent, SkillChaining
 
 __all__ = [
     "CONVERGENCE_EPISODES",
     "CONVERGENCE_THRESHOLD",
     "ConvergenceTest",
+    "DEFAULT_READING",
+    "FIRST_READING",
+    "InitiationReading",
+    "RecentStates",
     "DiscoveryEvent",
     "ExecutionTrace",
     "GESTATION_EPISODES",

@@ -55,8 +55,9 @@ from .convergence import CONVERGENCE_EPISODES, CONVERGENCE_THRESHOLD, Convergenc
 from .creation import choose_creation, covered_start
 from .events import MAX_BRANCHING, entered, evaluate_base_events, event_list, target_indicator
 from .executions import ExecutionTrace, execution_outcome
-from .gestation import GESTATION_EPISODES, gestation_over, initialise_option_values
+from .gestation import GESTATION_EPISODES, RecentStates, gestation_over, initialise_option_values
 from .overlap import exclude_overlap, overlap_exclusion
+from .readings import FIRST_READING, InitiationReading
 
 __all__ = ["SkillChaining", "DiscoveryEvent"]
 
@@ -94,11 +95,15 @@ class SkillChaining:
         convergence_episodes: consecutive such episodes (paper: 2).
         max_option_steps: an execution longer than this failed (paper: 250).
         overlap: apply the no-overlap rule (paper: yes).
-        wait_for_both_classes: fit an initiation set only once it has a positive and a
-            negative example (default: fit after every new example, as the paper). Measured
-            on 20 agents: with it, options whose executions never succeeded stayed available
-            everywhere with their optimistic Q(s, o), and agents spent episodes of 20,000-35,000
-            steps re-running them; without it such an option drops out after its failures.
+        reading: how the initiation sets start (:class:`~.readings.InitiationReading`:
+            gestation positives, the set at the end of gestation, when the 0.1 distance
+            constraint applies, one-class fits). Default: the first reading (no gestation
+            positives, true everywhere, constrained once learned, one-class fits).
+        wait_for_both_classes: shorthand for ``reading.one_class_fits = False``: fit an
+            initiation set only once it has a positive and a negative example. Measured on
+            20 agents of the first reading: options whose executions never succeeded stayed
+            available everywhere with their optimistic Q(s, o), and agents spent episodes of
+            20,000-35,000 steps re-running them.
     """
 
     def __init__(
@@ -112,6 +117,7 @@ class SkillChaining:
         max_option_steps: int = MAX_OPTION_STEPS,
         overlap: bool = True,
         wait_for_both_classes: bool = False,
+        reading: InitiationReading = FIRST_READING,
     ):
         if gestation < 0 or max_branching < 1 or max_option_steps < 1:
             raise ValueError("need gestation >= 0, max_branching >= 1, max_option_steps >= 1")
@@ -119,7 +125,10 @@ class SkillChaining:
         self.events = tuple(events)
         self.gestation, self.max_branching = int(gestation), int(max_branching)
         self.max_option_steps, self.overlap = int(max_option_steps), bool(overlap)
-        self.wait_for_both_classes = bool(wait_for_both_classes)
+        if wait_for_both_classes:
+            reading = reading.replace(one_class_fits=False)
+        self.reading = reading
+        self.wait_for_both_classes = not reading.one_class_fits
         P, K, E = bank.population, bank.slots, len(self.events)
         device = bank.status.device
         self.convergence = ConvergenceTest(P, K, convergence_threshold, convergence_episodes,
@@ -127,11 +136,17 @@ class SkillChaining:
         self.trace = ExecutionTrace(P, self.max_option_steps, bank.q_head, device=device)
         self.episode = torch.zeros(P, dtype=torch.int64, device=device)  # 0-based, running
         self.base_now = torch.zeros(P, E, dtype=torch.bool, device=device)  # events at s
+        # The classifiers' own sets at s, and at the state last evaluated (membership).
+        self.raw_now = torch.zeros(P, K, dtype=torch.bool, device=device)
+        self.last_raw = self.raw_now
         self.gestation_q = torch.full((P, K), -torch.inf, dtype=torch.float64, device=device)
         self.fitted = torch.zeros(P, K, dtype=torch.bool, device=device)  # this episode
         self.episode_weights = bank.classifier.snapshot()  # at each agent's episode start
         self.slots_full_logged = torch.zeros(P, dtype=torch.bool, device=device)
         self.log: list[DiscoveryEvent] = []
+        # The states each agent acted in this episode, for gestation positives (if any).
+        n = reading.gestation_positives
+        self.recent = RecentStates(P, n, device=device) if n > 0 else None
         self._base_next = self.base_now
         self._exclusion: Tensor | None = None
         # Reused CPU arrays for what the compiled outcomes and triggers write and the step
@@ -143,7 +158,14 @@ class SkillChaining:
 
     # ------------------------------------------------------------------ evaluation
     def membership(self, contains: Tensor) -> Tensor:
-        """The effective initiation sets ``[P, K]`` from the classifiers' ``contains``."""
+        """The effective initiation sets ``[P, K]`` from the classifiers' ``contains``.
+
+        The classifiers' own sets (``contains``) are kept as :attr:`last_raw`: target events
+        are those sets, while choice and the covered-start rule use the effective ones (a
+        child's set minus its parent's and older siblings'). Were targets the effective sets,
+        an option leaving its parent's set into a region its child's target covers would
+        "enter" that target without moving towards it, and create a child there."""
+        self.last_raw = contains
         if not self.overlap:
             return contains
         if self._exclusion is None:  # changes only when options are created
@@ -151,7 +173,10 @@ class SkillChaining:
         return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
 
     def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
-        """Every option's target event at ``s'`` ``[P, K]``; keeps the base events' values."""
+        """Every option's target event at ``s'`` ``[P, K]``; keeps the base events' values.
+
+        ``contains``: the classifiers' own sets at ``s'`` (:attr:`last_raw`), not the
+        effective ones (see :meth:`membership`)."""
         self._base_next = evaluate_base_events(self.events, next_obs, terminated)
         return target_indicator(self.bank, self._base_next, contains)
 
@@ -159,6 +184,15 @@ class SkillChaining:
         """Agents ``rows [P]`` start an episode at ``obs [P, 4]``."""
         fired = evaluate_base_events(self.events, obs, torch.zeros_like(rows))
         self.base_now = torch.where(rows[:, None], fired, self.base_now)
+        self.raw_now = torch.where(rows[:, None], self.last_raw, self.raw_now)
+        if self.recent is not None:
+            self.recent.start_episodes(rows)
+
+    def record_states(self, stepped: Tensor, obs: Tensor) -> None:
+        """Before a transition: agents ``stepped [P]`` act in ``obs [P, 4]`` (kept for the
+        gestation positives of the reading; nothing to do without them)."""
+        if self.recent is not None:
+            self.recent.record(stepped, obs)
 
     # ------------------------------------------------------------------ per step
     def record(self, executing: Tensor, step: Tensor, obs: Tensor) -> None:
@@ -182,19 +216,27 @@ class SkillChaining:
             duration, decision_ended: the decision's steps so far and whether it ended now.
             terminated: the episode terminated at ``s'`` ``[P]``.
 
+        Target events are entered and reached in the classifiers' own sets (:attr:`raw_now`
+        at ``s``, :attr:`last_raw` at ``s'``); ``contains`` (effective) decides coverage.
+
         Returns:
             ``BoolTensor [P]``: agents that created an option (their memberships at ``s'``
-            must be re-evaluated by the caller: the new slot changed them).
+            must be re-evaluated by the caller: the new slot changed them, and
+            :meth:`created_rows_evaluated` then takes their own sets).
         """
         bank = self.bank
+        raw_now, raw_next = self.raw_now, self.last_raw
+        self.raw_now = torch.where(stepped[:, None], raw_next, raw_now)
         self._finish_executions(option, reached, duration, decision_ended & stepped,
                                 terminated)  # fmt: skip
         sample = value  # Q(s, d) of the decision in force
+        if self.recent is not None:  # before base_now moves on to s'
+            self._gestation_positives(self._gestation_hits(raw_now, reached, stepped))
         if native_discovery.applies(contains, stepped):  # the same rules, compiled
             self.gestation_q, base_trig, slot_trig, self.base_now, any_listed = (
                 native_discovery.triggers(bank.parent, bank.target_event, bank.status,
-                                          self.base_now, self._base_next, contains,
-                                          contains_next, reached, stepped, sample,
+                                          self.base_now, self._base_next, raw_now,
+                                          raw_next, reached, stepped, sample,
                                           self.gestation_q, self.max_branching,
                                           self._triggers_out))  # fmt: skip
             if not any_listed:  # only listed events create
@@ -202,18 +244,45 @@ class SkillChaining:
             return self._create(base_trig, slot_trig, contains, option, sample)
         gestating = bank.status == OptionStatus.GESTATING
         if bool(gestating.any()):
-            before = target_indicator(bank, self.base_now, contains)
+            before = target_indicator(bank, self.base_now, raw_now)
             fired = entered(before, reached) & gestating & stepped[:, None]
             self.gestation_q = torch.where(fired, torch.maximum(self.gestation_q, sample[:, None]),
                                            self.gestation_q)  # fmt: skip
         base_trig = entered(self.base_now, self._base_next) & stepped[:, None]
-        slot_trig = entered(contains, contains_next) & stepped[:, None]
+        slot_trig = entered(raw_now, raw_next) & stepped[:, None]
         slot_trig = slot_trig & (bank.status == OptionStatus.LEARNED)
         self.base_now = torch.where(stepped[:, None], self._base_next, self.base_now)
         created = torch.zeros_like(stepped)
         if bool(base_trig.any()) or bool(slot_trig.any()):
             created = self._create(base_trig, slot_trig, contains, option, sample)
         return created
+
+    def created_rows_evaluated(self, created: Tensor) -> None:
+        """The caller re-evaluated the memberships at ``s'`` of the agents in ``created [P]``
+        (:meth:`membership`): keep those rows' own sets as the current ones."""
+        self.raw_now = torch.where(created[:, None], self.last_raw, self.raw_now)
+
+    def _gestation_hits(self, raw_now: Tensor, reached: Tensor, stepped: Tensor) -> Tensor:
+        """``[P, K]``: gestating options whose target was entered by this transition."""
+        gestating = self.bank.status == OptionStatus.GESTATING
+        hit = reached & gestating
+        if not bool(hit.any()):  # the usual step: no target of a gestating option at s'
+            return hit
+        before = target_indicator(self.bank, self.base_now, raw_now)
+        return entered(before, reached) & gestating & stepped[:, None]
+
+    def _gestation_positives(self, hits: Tensor) -> None:
+        """The last ``reading.gestation_positives`` states of each agent's trajectory become
+        positive examples of the slots in ``hits [P, K]`` (their target just fired)."""
+        if not bool(hits.any()):
+            return
+        classifier, n = self.bank.classifier, self.reading.gestation_positives
+        for p, k in hits.nonzero().tolist():
+            rows = torch.zeros_like(self.episode, dtype=torch.bool)
+            rows[p] = True
+            agents, obs = self.recent.window(rows, n)
+            labels = torch.ones_like(agents, dtype=torch.bool)
+            classifier.add_examples(agents, k, obs, labels)
 
     def _finish_executions(self, option: Tensor, reached: Tensor, duration: Tensor,
                            ended: Tensor, terminated: Tensor) -> None:  # fmt: skip
@@ -270,6 +339,8 @@ class SkillChaining:
         self.episode_weights = torch.where(new[..., None], bank.classifier.snapshot(),
                                            self.episode_weights)  # fmt: skip
         self._exclusion = None
+        if self.recent is not None:  # the creating hit is the first of gestation
+            self._gestation_positives(new)
         for p in create.nonzero()[:, 0].tolist():
             k = int(slot[p])
             self._emit("created", p, k, target=self.target_name(p, k))
@@ -302,6 +373,7 @@ class SkillChaining:
                     self._emit("learned", p, k, target=self.target_name(p, k))
         join = gestation_over(bank, self.episode, rows, self.gestation)
         if bool(join.any()):
+            self._start_sets(join)
             value = torch.nan_to_num(self.gestation_q, neginf=0.0)
             bank.set_status(join, OptionStatus.LEARNING)
             initialise_option_values(q_head, join, value)
@@ -312,6 +384,19 @@ class SkillChaining:
         self.episode_weights = torch.where(rows[:, None, None], classifier.snapshot(),
                                            self.episode_weights)  # fmt: skip
         self.fitted = self.fitted & ~rows[:, None]
+
+    def _start_sets(self, join: Tensor) -> None:
+        """The initiation sets of the options in ``join [P, K]`` as gestation ends, by the
+        reading: fitted on their gestation positives (``start="fitted"``), and under the
+        distance constraint from now on (``constrain="start"``)."""
+        classifier = self.bank.classifier
+        if self.reading.start == "fitted":
+            positive, negative = classifier.stored_classes()
+            fit = join & positive & (negative | self.reading.one_class_fits)
+            if bool(fit.any()):
+                classifier.fit(fit)
+        if self.reading.constrain == "start":
+            classifier.constrain(join)
 
     # ------------------------------------------------------------------ reading
     def target_name(self, agent: int, slot: int) -> str:
@@ -344,13 +429,15 @@ class SkillChaining:
         return events
 
     # ------------------------------------------------------------------ state
-    _STATE = ("episode", "base_now", "gestation_q", "fitted", "episode_weights",
+    _STATE = ("episode", "base_now", "raw_now", "gestation_q", "fitted", "episode_weights",
               "slots_full_logged")
 
     def state_dict(self) -> dict:
         state = {name: getattr(self, name).clone() for name in self._STATE}
         state["convergence"] = self.convergence.state_dict()
         state["trace"] = self.trace.state_dict()
+        if self.recent is not None:
+            state["recent"] = self.recent.state_dict()
         return state
 
     def load_state_dict(self, state: dict) -> None:
@@ -359,6 +446,11 @@ class SkillChaining:
             setattr(self, name, state[name].to(device).clone())
         self.convergence.load_state_dict(state["convergence"])
         self.trace.load_state_dict(state["trace"])
+        if self.recent is not None:
+            if "recent" not in state:
+                raise ValueError("the saved discovery state has no recent states: it was "
+                                 "saved by a reading without gestation positives")
+            self.recent.load_state_dict(state["recent"])
         self._exclusion = None
         self.log = []
 
@@ -366,4 +458,5 @@ class SkillChaining:
         return (f"SkillChaining(events={[e.name for e in self.events]}, "
                 f"gestation={self.gestation}, max_branching={self.max_branching}, "
                 f"convergence={self.convergence.threshold}x{self.convergence.episodes}, "
-                f"max_option_steps={self.max_option_steps}, overlap={self.overlap})")
+                f"max_option_steps={self.max_option_steps}, overlap={self.overlap}, "
+                f"reading={self.reading.name})")

@@ -270,10 +270,10 @@ class InitiationClassifier(nn.Module):
         positives = self.examples[p, k, :count][self.labels[p, k, :count]]  # [M, 4]
         out = []
         for chunk in obs.to(device=w.device, dtype=w.dtype).split(_POINTS_CHUNK):
-            if not trained:
-                out.append(torch.ones(chunk.shape[0], dtype=torch.bool, device=w.device))
-                continue
-            member = (rowwise_dot(self.phi(chunk), w[None, :]) + b) > 0
+            if trained:
+                member = (rowwise_dot(self.phi(chunk), w[None, :]) + b) > 0
+            else:  # true everywhere, but for the constraint (as contains)
+                member = torch.ones(chunk.shape[0], dtype=torch.bool, device=w.device)
             if constrained:
                 if positives.shape[0] == 0:
                     near = torch.zeros_like(member)

@@ -301,6 +301,24 @@ def test_learned_set_is_a_target_event_chaining():
     assert agent.discovery.depth()[0].tolist()[:2] == [1, 2]
 
 
+def test_leaving_the_parents_set_into_the_childs_does_not_trigger_the_child():
+    # Goal option 0 holds [0.8, 1] (x > 0.6 within 0.1 of its positive at 0.9); its learned
+    # child 1 holds x > 0.2 by its own classifier, (0.2, 0.8) once the no-overlap rule removes
+    # the parent's set. Moving from 0.85 to 0.5 enters the child's effective set but not its
+    # own set: no grandchild is created (issue 15: such triggers spawned options leading away
+    # from the goal). Entering its own set from 0.1 does create one.
+    for start, created in ((0.85, False), (0.1, True)):
+        agent = make_agent(slots=4)
+        k = learned_goal_option(agent)
+        child = add_option(agent, parent=k, status=OptionStatus.LEARNED)
+        half_plane(agent, child, 0.2)
+        agent.begin(point(start))
+        agent.observe(point(0.5), R)
+        assert agent.bank.live()[0].sum() == (3 if created else 2), start
+        if created:
+            assert agent.bank.parent[0, 2] == child
+
+
 def test_event_list_holds_learned_sets_until_three_children():
     agent = make_agent(slots=6)
     k = add_option(agent, target_event=0)
