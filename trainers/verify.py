@@ -1,0 +1,111 @@
+"""``skillchain verify RUN_DIR --agents 3 7``: re-run published agents alone, compare bit for bit.
+
+By the seed contract agent ``p`` of a population started with seed ``S`` is the single agent
+with seed ``S + p``, whatever the other agents did. So any agent of a published run can be
+re-run on its own from the directory's ``config.json`` in a fraction of the run's time, and
+its returns and lengths must equal row ``p`` of ``returns.npy`` and ``lengths.npy`` exactly.
+
+A given-options run whose agents took saved agent ``p mod N``'s options (``--options-agent
+each``) re-runs agent ``p`` with saved agent ``p mod N``'s; its options file must be present
+(``config.options``, read as given or relative to the run directory's parent folders).
+
+Example:
+    >>> import tempfile, numpy as np
+    >>> from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+    >>> out = tempfile.mkdtemp()
+    >>> cfg = TrainConfig(runs=3, episodes=2, max_episode_steps=30, seed=5)
+    >>> trainer = PopulationTrainer(cfg); _ = trainer.train(); trainer.write_results(out)
+    >>> cfg.save_json(f"{out}/config.json")
+    >>> [r["match"] for r in verify_run(out, [0, 2])]
+    [True, True]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .config import TrainConfig
+
+__all__ = ["verify_run", "resolve_options_path"]
+
+
+def resolve_options_path(options: str, run_dir: Path) -> Path:
+    """``options`` as given if it exists, else relative to ``run_dir`` or a folder above it."""
+    path = Path(options)
+    if path.is_file() or path.is_absolute():
+        return path
+    for base in (run_dir, *run_dir.resolve().parents):
+        if (base / path).is_file():
+            return base / path
+    return path
+
+
+def _saved_population(path: Path) -> int:
+    from skillchain_torch.options import OptionBank
+
+    return OptionBank.load(path).population
+
+
+def verify_run(run_dir: str | Path, agents, native: bool | None = None,
+               progress: bool = False) -> list[dict]:  # fmt: skip
+    """Re-run ``agents`` of the run in ``run_dir`` one at a time; one dict per agent with
+    ``agent``, ``seed``, ``match``, ``returns_match``, ``lengths_match``, ``first_difference``
+    (the first episode that differs, or ``None``) and ``wall_time_s``.
+
+    ``native``: the kernels to re-run with (default: those ``run_info.json`` names, else the
+    default). ``ValueError`` names a missing file or an agent outside the run.
+    """
+    from .population import PopulationTrainer
+
+    run_dir = Path(run_dir)
+    for name in ("config.json", "returns.npy", "lengths.npy"):
+        if not (run_dir / name).is_file():
+            raise ValueError(f"{run_dir}: no {name} (not a finished run directory)")
+    config = TrainConfig.load_json(run_dir / "config.json").resolved()
+    returns, lengths = np.load(run_dir / "returns.npy"), np.load(run_dir / "lengths.npy")
+    if returns.shape != (config.runs, config.episodes) or lengths.shape != returns.shape:
+        raise ValueError(f"{run_dir}: returns.npy {returns.shape} / lengths.npy {lengths.shape} "
+                         f"do not match config.json's runs x episodes "
+                         f"({config.runs}, {config.episodes})")  # fmt: skip
+    if native is None and (run_dir / "run_info.json").is_file():
+        info = json.loads((run_dir / "run_info.json").read_text())
+        native = False if info.get("compiled_agent") is False else None
+    changes = {}
+    saved = None
+    if config.agent == "given-options":
+        path = resolve_options_path(config.options, run_dir)
+        if not path.is_file():
+            raise ValueError(f"{run_dir}: its options file {config.options!r} is not here "
+                             f"(given-options runs need it to be re-run)")  # fmt: skip
+        changes["options"] = str(path)
+        if config.options_agent is None:
+            saved = _saved_population(path)
+    results = []
+    for p in agents:
+        p = int(p)
+        if not 0 <= p < config.runs:
+            raise ValueError(f"agent {p} is not in {run_dir} (agents 0..{config.runs - 1})")
+        single = dataclasses.replace(config, runs=1, seed=config.seed + p, checkpoint_every=0,
+                                     **changes)  # fmt: skip
+        if saved is not None:
+            single = dataclasses.replace(single, options_agent=p % saved)
+        trainer = PopulationTrainer(single, native=native)
+        trainer.train()
+        same_r = np.array_equal(trainer.returns[0], returns[p], equal_nan=True)
+        same_l = np.array_equal(trainer.lengths[0], lengths[p])
+        differ = np.nonzero((trainer.returns[0] != returns[p]) | (trainer.lengths[0] != lengths[p]))
+        first = int(differ[0][0]) + 1 if differ[0].size else None
+        results.append({"agent": p, "seed": single.seed, "match": same_r and same_l,
+                        "returns_match": same_r, "lengths_match": same_l,
+                        "first_difference": first, "wall_time_s": trainer.elapsed,
+                        "agent_steps": int(trainer.agent_steps)})  # fmt: skip
+        if progress:
+            r = results[-1]
+            print(f"agent {p} (seed {single.seed}): {'match' if r['match'] else 'MISMATCH'}"
+                  + ("" if first is None else f" from episode {first}")
+                  + f" ({r['agent_steps']:,} steps, {r['wall_time_s']:.1f} s)", flush=True)
+    return results
