@@ -35,6 +35,17 @@ LABELS = {"flat": "flat (no options)", "skill-chaining": "skill chaining",
           "given-options": "given options"}  # fmt: skip
 
 
+def _save(fig, path, title: str, dpi: int) -> Path:
+    import matplotlib.pyplot as plt
+
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return Path(path)
+
+
 def plot_curves(returns: dict, ax=None, title: str | None = None, smooth: int = 1):
     """Each ``returns[name] [runs, episodes]`` as a mean curve with a 95% band (mean +- 1.96
     sd / sqrt(runs)), optionally averaged over ``smooth`` episodes."""
@@ -126,12 +137,7 @@ def solution_figure(runs: list[dict], map_name: str, path: str | Path, title: st
     fig, axes = plt.subplots(1, len(runs), figsize=(5 * len(runs), 5), squeeze=False)
     for ax, run in zip(axes[0], runs):
         plot_option_trajectory(run, map_name, ax=ax)
-    if title:
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path, title, dpi=120)
 
 
 @torch.no_grad()
@@ -204,9 +210,4 @@ def initiation_figure(agent, runs: list[dict], map_name: str, path: str | Path,
             ax.plot(states[0, 0], states[0, 1], "o", color=color, ms=4)
     for ax in axes.ravel()[len(used):]:
         ax.axis("off")
-    if title:
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path, title, dpi=110)

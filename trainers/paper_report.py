@@ -173,7 +173,7 @@ def _consistency(runs: dict, windows) -> list[str]:
     return lines
 
 
-def _runs_table(runs: dict, base: Path) -> list[str]:
+def _runs_table(runs: dict) -> list[str]:
     lines = ["| run | runs x episodes | agent steps | steps per run (min-max) | longest episode | "
              "wall time | commit |", "|---|---|---|---|---|---|---|"]  # fmt: skip
     for a, run in runs.items():
@@ -235,7 +235,7 @@ def write_report(out: str | Path, names: list[str] | None = None, quiet: bool = 
             if n_opt is not None:
                 md += [f"Options per skill-chaining agent at the end: {n_opt[:, -1].mean():.1f} "
                        f"(min {n_opt[:, -1].min()}, max {n_opt[:, -1].max()}).", ""]
-        md += ["Runs:", ""] + _runs_table(runs, out) + [""]
+        md += ["Runs:", ""] + _runs_table(runs) + [""]
         md += ["Runaway episodes:", ""] + _runaways(runs) + [""]
         if figures:
             md += _figures(out, instance, runs, quiet)

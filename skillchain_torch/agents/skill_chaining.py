@@ -144,7 +144,7 @@ class SkillChainingAgent(HierarchicalAgent):
         terminated = as_bool(terminated)
         created = self.discovery.after_transition(
             contains=contains, option=option, value=value,
-            contains_next=self.contains, reached=info["reached"], duration=info["duration"],
+            reached=info["reached"], duration=info["duration"],
             decision_ended=info["decision_ended"],
             terminated=terminated if every else terminated & stepped, stepped=stepped,
         )  # fmt: skip

@@ -204,7 +204,7 @@ class SkillChaining:
         self.trace.start(rows, slot)  # (nothing when no row starts)
 
     def after_transition(self, *, contains: Tensor, option: Tensor, value: Tensor,
-                         contains_next: Tensor, reached: Tensor, duration: Tensor,
+                         reached: Tensor, duration: Tensor,
                          decision_ended: Tensor, terminated: Tensor,
                          stepped: Tensor) -> Tensor:  # fmt: skip
         """Apply the rules to the transitions ``s -> s'`` of the rows in ``stepped [P]``.
@@ -212,7 +212,7 @@ class SkillChaining:
         Args:
             contains, option, value: at ``s``: memberships ``[P, K]``, the executing slot
                 (-1 none), and the top-level ``Q(s, d) [P]`` of the decision d in force.
-            contains_next, reached: at ``s'``: memberships and each option's target ``[P, K]``.
+            reached: at ``s'``: each option's target ``[P, K]`` (in the classifiers' own sets).
             duration, decision_ended: the decision's steps so far and whether it ended now.
             terminated: the episode terminated at ``s'`` ``[P]``.
 

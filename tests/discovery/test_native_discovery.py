@@ -125,11 +125,12 @@ def test_after_transition_equals_torch(monkeypatch):
         sc = SkillChaining(bank, max_option_steps=5)
         sc.base_now = flags((P, 1), 4, 0.2)
         sc._base_next = flags((P, 1), 5, 0.3)
+        sc.raw_now, sc.last_raw = flags((P, K), 7), flags((P, K), 8)  # own sets at s, s'
         sc.gestation_q = torch.randn(P, K, dtype=torch.float64,
                                      generator=torch.Generator().manual_seed(6))
         created = sc.after_transition(
             contains=flags((P, K), 7), option=torch.full((P,), -1), value=torch.linspace(
-                -1, 1, P, dtype=torch.float64), contains_next=flags((P, K), 8),
+                -1, 1, P, dtype=torch.float64),
             reached=flags((P, K), 10), duration=torch.ones(P, dtype=torch.int64),
             decision_ended=flags(P, 11), terminated=flags(P, 12, 0.1), stepped=flags(P, 13, 0.8))
         results.append((created, sc.gestation_q, sc.base_now, bank.status.clone(),

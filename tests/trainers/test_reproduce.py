@@ -1,4 +1,4 @@
-"""``skillchain reproduce paper`` and ``skillchain verify`` end to end, on a tiny study (issue 15)."""
+"""``skillchain reproduce paper`` and ``skillchain verify`` on a tiny study (issue 15)."""
 
 from __future__ import annotations
 
