@@ -65,6 +65,8 @@ CONFIG_OPTIONS = (
     "initiation_start",
     "initiation_constrain",
     "one_class_fits",
+    "failure_bootstrap",
+    "keep_negatives",
 )
 
 
@@ -178,6 +180,20 @@ def build_parser() -> argparse.ArgumentParser:
         const=False,
         default=None,
         help="reading: fit an initiation set only once it holds both classes",
+    )
+    train.add_argument(
+        "--keep-negatives",
+        choices=("on", "off"),
+        default=None,
+        help="initiation-set stores never drop a failure to make room for a success's "
+        "positives",
+    )
+    train.add_argument(
+        "--failure-bootstrap",
+        choices=("decision", "primitives"),
+        default=None,
+        help="what a timed-out option execution's SMDP target bootstraps on: the next "
+        "decision (Sarsa, the paper) or the best primitive at s'",
     )
     train.add_argument(
         "--checkpoint-every",
@@ -329,6 +345,8 @@ def _config_from_args(parser, args) -> TrainConfig:
     given = {k: v for k, v in given.items() if v is not None}
     if given.get("options_agent") == "each":
         given["options_agent"] = None
+    if "keep_negatives" in given:
+        given["keep_negatives"] = given["keep_negatives"] == "on"
     if args.device is not None:
         given["device"] = args.device
     try:

@@ -28,7 +28,11 @@ from typing import Any
 from skillchain_torch.discovery.readings import DEFAULT_READING as _DEFAULT
 from skillchain_torch.discovery.readings import InitiationReading
 
-__all__ = ["TrainConfig", "paper_defaults", "RESUME_FIELDS"]
+__all__ = ["TrainConfig", "paper_defaults", "RESUME_FIELDS", "LEGACY_FIELDS"]
+
+# Fields added after runs were published, with the behaviour every run before them had: a
+# saved config without one of them ran with this value (whatever today's default is).
+LEGACY_FIELDS = {"failure_bootstrap": "decision", "keep_negatives": False}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
@@ -72,6 +76,12 @@ class TrainConfig:
             :class:`~skillchain_torch.discovery.InitiationReading`); the defaults are
             :data:`~skillchain_torch.discovery.DEFAULT_READING` (the first reading; see
             ``results/screening/README.md``).
+        failure_bootstrap: what a timed-out option execution's SMDP target bootstraps on
+            (``"decision"``: Sarsa's ``Q(s', d')``, the paper; ``"primitives"``: the best
+            primitive at ``s'``; see :class:`~skillchain_torch.agents.HierarchicalAgent`).
+        keep_negatives: the initiation classifiers' stores never drop a failure to make room
+            for a success's positives (see :class:`~skillchain_torch.options.
+            InitiationClassifier`).
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -99,6 +109,8 @@ class TrainConfig:
     initiation_start: str = _DEFAULT.start
     initiation_constrain: str = _DEFAULT.constrain
     one_class_fits: bool = _DEFAULT.one_class_fits
+    failure_bootstrap: str = "decision"
+    keep_negatives: bool = False
 
     @property
     def reading(self):
@@ -134,6 +146,9 @@ class TrainConfig:
             ("initiation_bias", self.initiation_bias, math.isfinite(self.initiation_bias),
              "finite"),
         ]
+        if self.failure_bootstrap not in ("decision", "primitives"):
+            raise ValueError(f"failure_bootstrap must be one of decision, primitives, got "
+                             f"{self.failure_bootstrap!r}")  # fmt: skip
         if self.options_agent is not None:
             checks.append(("options_agent", self.options_agent, self.options_agent >= 0, ">= 0"))
         if self.alpha is not None:
@@ -176,7 +191,7 @@ class TrainConfig:
         unknown = sorted(set(data) - names)
         if unknown:
             raise ValueError(f"unknown config fields: {', '.join(unknown)}")
-        return cls(**data)
+        return cls(**{**LEGACY_FIELDS, **data})
 
     def save_json(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")

@@ -66,6 +66,7 @@ class GivenOptionsAgent(HierarchicalAgent):
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device,
+                         failure_bootstrap=cfg.failure_bootstrap,
                          overlap=True,  # as the options were learned (no-op if unrelated)
                          native=native)
         self.config = cfg

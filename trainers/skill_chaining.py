@@ -39,9 +39,11 @@ class SkillChainingRunAgent(SkillChainingAgent):
         # Class-balanced initiation-set fits: see SkillChainingAgent.build.
         bank = OptionBank.build(cfg.runs, cfg.slots, seed=cfg.seed, device=device, balanced=True,
                                 initial_bias=cfg.initiation_bias,
+                                keep_negatives=cfg.keep_negatives,
                                 centered=cfg.initiation_centered)  # fmt: skip
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
-                         scale_step_size=cfg.scale_step_size, device=device, native=native,
+                         scale_step_size=cfg.scale_step_size, device=device,
+                         failure_bootstrap=cfg.failure_bootstrap, native=native,
                          reading=cfg.reading)
         self.config = cfg

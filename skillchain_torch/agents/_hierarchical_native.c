@@ -159,7 +159,7 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  *      max_option_steps, alpha_o, completion, step, step_stride, executable_from,
  *      out_obs, out_code, out_contains, out_phi, out_decision, out_option, out_action,
  *      out_ret, out_duration, q, d_next, decision_ended, option_delta, smdp_delta,
- *      info_duration, info_return, started, value)
+ *      info_duration, info_return, started, value, fail_boot)
  *
  * HierarchicalAgent.transition for every row, given what needs torch or Python at s'
  * (memberships, targets, features, uniforms [P, 4]): the intra-option updates, the decision's
@@ -184,10 +184,10 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         cols_p, status_p, u_p, step_p, o_obs, o_code, o_con, o_phi, o_dec, o_opt, o_act, o_ret,
         o_dur, q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p, value_p;
     double epsilon, option_epsilon, gamma, alpha_o, completion;
-    int use_gamma;
+    int use_gamma, fail_boot;
     long long max_option_steps, executable_from;
     if (!PyArg_ParseTuple(args,
-                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKKK",
+                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKKKi",
                           &P, &K, &A, &F, &Fo, &w_p, &wo_p, &obs_p, &code_p, &con_p, &phi_p,
                           &dec_p, &opt_p, &act_p, &ret_p, &dur_p, &nobs_p, &rew_p, &term_p,
                           &trunc_p, &st_p, &conn_p, &reach_p, &phin_p, &coden_p, &cols_p,
@@ -195,7 +195,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
                           &max_option_steps, &alpha_o, &completion, &step_p, &step_stride,
                           &executable_from, &o_obs, &o_code, &o_con, &o_phi, &o_dec, &o_opt,
                           &o_act, &o_ret, &o_dur, &q_p, &dn_p, &de_p, &od_p, &sd_p, &id_p,
-                          &ir_p, &started_p, &value_p))
+                          &ir_p, &started_p, &value_p, &fail_boot))
         return NULL;
     Py_ssize_t D = A + K;
     if (D > MAX_CHOICES) {
@@ -271,8 +271,15 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         int64_t dn = choose_row(w + p * D * F, phi_next + p * F, ok, D, F, A, dec_end,
                                 epsilon, up, qp);
         d_next[p] = dn;
+        /* A timed-out execution bootstraps on the best primitive at s' (fail_boot), not on
+         * d': d' is often the same optimistic option again (see failure_bootstrap). */
+        double q_boot = qp[dn];
+        if (fail_boot && executing && !reach[option[p]] && k_steps >= max_option_steps) {
+            q_boot = qp[0];
+            for (Py_ssize_t a = 1; a < A; a++) q_boot = qp[a] > q_boot ? qp[a] : q_boot;
+        }
         smdp_delta[p] = dec_end ? smdp_row(w + (p * D + decision[p]) * F, phi + p * F, F, R,
-                                           k_steps < 1 ? 1 : k_steps, qp[dn], term, step_size,
+                                           k_steps < 1 ? 1 : k_steps, q_boot, term, step_size,
                                            step_stride, gamma, use_gamma)
                                 : 0.0;
 

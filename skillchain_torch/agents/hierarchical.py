@@ -69,11 +69,12 @@ from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
 
 __all__ = ["HierarchicalAgent", "shared_fourier_columns", "NUM_PRIMITIVES", "MAX_OPTION_STEPS",
-           "UNIFORMS_PER_STEP"]
+           "UNIFORMS_PER_STEP", "FAILURE_BOOTSTRAPS"]
 
 NUM_PRIMITIVES = 5
 OBS_DIM = 4
 MAX_OPTION_STEPS = 250
+FAILURE_BOOTSTRAPS = ("decision", "primitives")
 UNIFORMS_PER_STEP = 4  # top-level (explore, pick), option (explore, pick)
 AGENT_STREAM = 0
 
@@ -127,6 +128,14 @@ class HierarchicalAgent(nn.Module):
         overlap: apply skill chaining's no-overlap rule to memberships (an option stays out
             of its parent's and older siblings' sets), for options discovered under it; the
             bank's tree must not change afterwards (discovery itself uses ``SkillChaining``).
+        failure_bootstrap: what the SMDP target of an option execution that *timed out*
+            (ran ``max_option_steps`` without its target) bootstraps on: ``"decision"``
+            (Sarsa, the paper: ``Q(s', d')``) or ``"primitives"`` (``max_a Q(s', a)`` over
+            the five primitives). Under ``gamma = 1`` an option whose initial ``Q(s, o)`` is
+            optimistic is usually re-chosen at ``s'``, so with ``"decision"`` each timeout
+            lowers its value only by about its own cost (~100-300) and an agent can re-run
+            a failing option dozens of times in one episode; ``"primitives"`` charges the
+            failure against what the agent can do without options.
         device: torch device (default: the bank's).
         native: run the per-step arithmetic in C (:mod:`.native_hierarchical`, and the
             classifier's memberships and fits, :mod:`~skillchain_torch.options.
@@ -150,10 +159,15 @@ class HierarchicalAgent(nn.Module):
         completion_reward: float | Tensor = 10_000.0,
         scale_step_size: bool = False,
         overlap: bool = False,
+        failure_bootstrap: str = "decision",
         device: torch.device | str | None = None,
         native: bool | None = None,
     ):
         super().__init__()
+        if failure_bootstrap not in FAILURE_BOOTSTRAPS:
+            raise ValueError(f"failure_bootstrap must be one of {', '.join(FAILURE_BOOTSTRAPS)}"
+                             f", got {failure_bootstrap!r}")  # fmt: skip
+        self.failure_bootstrap = failure_bootstrap
         device = torch.device(bank.status.device if device is None else device)
         self.bank = bank.to(device)
         self.native = _native.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES)
@@ -395,6 +409,10 @@ class HierarchicalAgent(nn.Module):
                                         rows=decision_ended)  # fmt: skip
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
+        if self.failure_bootstrap == "primitives":  # a timeout: the best primitive at s'
+            timed_out = option_stops & ~reached.gather(1, slot[:, None])[:, 0]
+            best = self.last_q[:, :NUM_PRIMITIVES].max(1).values
+            q_next = torch.where(timed_out, best, q_next)
         smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
                                  self.decision_return, self.duration.clamp(min=1), phi_next,
                                  d_next, terminated, active=decision_ended, next_value=q_next)
@@ -535,4 +553,5 @@ class HierarchicalAgent(nn.Module):
         return (f"population={self.population}, slots={self.slots}, "
                 f"epsilon={self.epsilon}, option_epsilon={self.option_epsilon}, "
                 f"gamma={self.gamma}, max_option_steps={self.max_option_steps}, "
+                f"failure_bootstrap={self.failure_bootstrap}, "
                 f"active={int(self._index.numel())}, native={self.native}")

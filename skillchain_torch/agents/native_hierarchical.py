@@ -164,7 +164,8 @@ def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, trun
             *[x.data_ptr() for x in new_state], q.data_ptr(), d_next.data_ptr(),
             decision_ended.data_ptr(), option_delta.data_ptr(), smdp_delta.data_ptr(),
             info_duration.data_ptr(), info_return.data_ptr(), started.data_ptr(),
-            0 if value is None else value.data_ptr())  # fmt: skip
+            0 if value is None else value.data_ptr(),
+            int(agent.failure_bootstrap == "primitives"))  # fmt: skip
     info = {"decision_ended": decision_ended, "duration": info_duration,
             "decision_return": info_return, "option_delta": option_delta,
             "smdp_delta": smdp_delta, "decision": state["decision"], "option": state["option"],

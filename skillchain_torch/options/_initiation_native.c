@@ -354,11 +354,12 @@ static PyObject *fit(PyObject *self, PyObject *args)
 
 
 /* The classifier's stores, as passed to store and store_executions after their own
- * arguments: seeds, generation, salt, ring, seen, examples, labels, count, touched. */
+ * arguments: seeds, generation, salt, flags, seen, examples, labels, count, touched. flags:
+ * bit 0 ring replacement, bit 1 keep negatives (a positive never replaces a stored negative). */
 typedef struct {
     const int64_t *seeds, *generation;
     uint64_t salt;
-    int ring;
+    int ring, keep_negatives;
     int64_t *seen, *count;
     double *examples;
     uint8_t *labels, *touched;
@@ -372,7 +373,7 @@ static Stores make_stores(unsigned long long seeds_p, unsigned long long gen_p, 
                           unsigned long long t_p)
 {
     Stores st = {(const int64_t *)(uintptr_t)seeds_p, (const int64_t *)(uintptr_t)gen_p,
-                 (uint64_t)salt, ring, (int64_t *)(uintptr_t)seen_p, (int64_t *)(uintptr_t)cnt_p,
+                 (uint64_t)salt, ring & 1, (ring >> 1) & 1, (int64_t *)(uintptr_t)seen_p, (int64_t *)(uintptr_t)cnt_p,
                  (double *)(uintptr_t)ex_p, (uint8_t *)(uintptr_t)lab_p,
                  (uint8_t *)(uintptr_t)t_p};
     return st;
@@ -401,6 +402,9 @@ static void store_in(const Stores *st, int64_t p, int64_t k, int64_t K, int64_t 
         if (draw > index) draw = index;
         place = draw < C ? draw : -1;
     }
+    /* keep negatives: a positive landing on a stored negative is dropped instead */
+    if (place >= 0 && label && st->keep_negatives && index >= C && !st->labels[s * C + place])
+        place = -1;
     st->touched[s] = 1;
     st->count[s] = st->seen[s] < C ? st->seen[s] : C;
     if (place < 0) return;

@@ -53,6 +53,14 @@ class InitiationClassifier(nn.Module):
         replacement: ``"reservoir"`` (default): once a slot has seen ``n >= C`` examples, the
             ``n``-th replaces a uniformly drawn stored one with probability ``C / (n + 1)``, so
             the store is a uniform sample of everything seen; ``"ring"``: the newest C.
+        keep_negatives: once a slot's store is full, a new positive example that would replace
+            a stored *negative* is dropped instead (negatives are replaced only by negatives).
+            Skill chaining adds up to 250 positives per successful execution and one negative
+            per failed one; without this the reservoir keeps a uniform sample of all examples,
+            so after a few hundred successes a store of 500 holds one or two of the option's
+            failures (measured: 499 positives and 1 negative after 40 episodes) and the set
+            cannot shrink where the option keeps failing. The paper's classifier sees every
+            example; this keeps every failure within the cap.
         balanced: weight the two classes equally in the loss (each class's examples share half
             of it), as ``class_weight="balanced"`` does in scikit-learn. Skill chaining turns
             a successful execution into up to 250 positive examples and a failed one into a
@@ -100,6 +108,7 @@ class InitiationClassifier(nn.Module):
         distance: float = 0.1,
         distance_dims: tuple[int, ...] | list[int] | None = None,
         replacement: str = "reservoir",
+        keep_negatives: bool = False,
         balanced: bool = False,
         initial_bias: float = 0.0,
         centered: bool = False,
@@ -120,10 +129,11 @@ class InitiationClassifier(nn.Module):
         self.lr, self.sweeps, self.distance = float(lr), int(sweeps), float(distance)
         self.distance_dims, self.replacement = dims, replacement
         self.balanced = bool(balanced)
+        self.keep_negatives = bool(keep_negatives)
         self.config: dict[str, Any] = dict(
             population=population, slots=slots, degree=degree, lr=self.lr, sweeps=self.sweeps,
             capacity=capacity, distance=self.distance, distance_dims=list(dims),
-            replacement=replacement, balanced=self.balanced, initial_bias=float(initial_bias),
+            replacement=replacement, keep_negatives=self.keep_negatives, balanced=self.balanced, initial_bias=float(initial_bias),
             centered=bool(centered), dtype=dtype_name(dtype),
         )  # fmt: skip
         self.initial_bias, self.centered = float(initial_bias), bool(centered)
@@ -317,11 +327,24 @@ class InitiationClassifier(nn.Module):
         touched = torch.zeros(self.population * self.slots, dtype=torch.bool, device=device)
         if n == 0:
             return touched.reshape(self.population, self.slots)
+        labels = labels.to(device).to(torch.bool)
+        if self.keep_negatives and n > 1 and not bool((labels == labels[0]).all()):
+            # Mixed labels: one at a time, so each positive sees the labels stored before it.
+            for i in range(n):
+                touched |= self.add_examples(p[i], k[i], obs[i:i + 1], labels[i:i + 1]).reshape(-1)
+            return touched.reshape(self.population, self.slots)
         flat = p * self.slots + k
         cell, keep = store_places(flat, self.seen.reshape(-1), self.seeds[p], k,
                                   self.generation[p, k], self.capacity, self.replacement)
+        if self.keep_negatives and bool(labels[0]):
+            # All positive: drop those landing on a place that held a negative before this
+            # batch (a place filled earlier in the batch holds a positive).
+            store, place = cell // self.capacity, cell % self.capacity
+            held = place < self.count.view(-1)[store]
+            negative = held & ~self.labels.view(-1)[cell]
+            cell, keep = cell[~negative], keep[~negative]
         self.examples.view(-1, OBS_DIM)[cell] = obs[keep].to(self.examples.dtype)
-        self.labels.view(-1)[cell] = labels[keep].to(device).to(torch.bool)
+        self.labels.view(-1)[cell] = labels[keep]
         self.seen.view(-1).index_add_(0, flat, torch.ones_like(flat))
         self.count.copy_(torch.clamp(self.seen, max=self.capacity))
         touched[flat] = True

@@ -105,7 +105,8 @@ def fit(features: PolynomialFeatures, centered: bool, mask: Tensor, examples: Te
 def _stores(classifier, touched: Tensor) -> tuple:
     """The classifier's store arguments of the C ``store`` functions, in their order."""
     return (classifier.seeds.data_ptr(), classifier.generation.data_ptr(), RESERVOIR_STREAM,
-            classifier.replacement == "ring", classifier.seen.data_ptr(),
+            int(classifier.replacement == "ring") | (int(classifier.keep_negatives) << 1),
+            classifier.seen.data_ptr(),
             classifier.examples.data_ptr(), classifier.labels.data_ptr(),
             classifier.count.data_ptr(), touched.data_ptr())  # fmt: skip
 

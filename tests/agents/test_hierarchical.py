@@ -426,3 +426,45 @@ def test_episode_start_encodes_only_the_starting_rows(native):
         mine, theirs = getattr(restarted, name), getattr(plain, name)
         assert torch.equal(mine[[0, 2]], theirs[[0, 2]]), name  # the others untouched
     assert not torch.equal(restarted.decision_phi[1], plain.decision_phi[1])
+
+
+@pytest.mark.parametrize("native", [False, True])
+@pytest.mark.parametrize("rule", ["decision", "primitives"])
+def test_timed_out_option_bootstraps_by_failure_bootstrap(rule, native):
+    """A timeout's SMDP target: Q(s', d') (Sarsa) or the best primitive at s' ("primitives"),
+    while a success (the option's target reached) bootstraps on d' under both rules."""
+    if native and not HierarchicalAgent(make_bank(), order=1, native=None).native:
+        pytest.skip("compiled agent kernels not built")
+    agent = make_agent(make_bank(), failure_bootstrap=rule, max_option_steps=3, native=native)
+    prefer_option(agent, value=100.0)  # the option is re-chosen at s' (d' = 5)
+    agent.q_head.weight[:, 2, 0] = 7.0  # the best primitive: Q(s, 2) = 7 everywhere
+    s = obs((0.7, 0.5, 0.5, 0.5))  # in the set, never at the target region
+    agent.begin(s)
+    yes = torch.tensor([True])
+    for _ in range(2):
+        agent.transition(s, torch.tensor([-1.0], dtype=F64), NO, NO, yes)
+    w = agent.q_head.weight.clone()
+    info = agent.transition(s, torch.tensor([-1.0], dtype=F64), NO, NO, yes)
+    assert info["decision_ended"].tolist() == [True] and info["duration"].tolist() == [3]
+    assert agent.decisions.tolist() == [5]  # d' is the option again
+    q_sa = (w[0, 5] * agent.features(s)[0]).sum().item()
+    boot = 100.0 if rule == "decision" else 7.0
+    assert info["smdp_delta"].item() == pytest.approx(-3.0 + boot - q_sa, rel=1e-12)
+    # a success bootstraps on d' whatever the rule
+    agent2 = make_agent(make_bank(), failure_bootstrap=rule, native=native)
+    prefer_option(agent2, value=100.0)
+    agent2.q_head.weight[:, 2, 0] = 7.0
+    agent2.begin(s)
+    goal = obs((0.9, 0.2, 0.5, 0.5))  # in the set and at the target region
+    w = agent2.q_head.weight.clone()
+    info = agent2.transition(goal, torch.tensor([-1.0], dtype=F64), NO, NO, yes)
+    q_sa = (w[0, 5] * agent2.features(s)[0]).sum().item()
+    d_next = int(agent2.decision[0])
+    q_next = (w[0, d_next] * agent2.features(goal)[0]).sum().item()
+    assert d_next == 5
+    assert info["smdp_delta"].item() == pytest.approx(-1.0 + q_next - q_sa, rel=1e-12)
+
+
+def test_failure_bootstrap_is_checked():
+    with pytest.raises(ValueError, match="failure_bootstrap must be one of"):
+        make_agent(make_bank(), failure_bootstrap="optimistic")

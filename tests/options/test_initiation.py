@@ -330,3 +330,60 @@ def test_distance_constraint_same_bits_alone_in_a_population_and_when_drawn():
             assert bool(together) == bool(alone.near_positive(obs)[0, 1])
             member = clf.contains(obs.expand(4, 4).contiguous())[p, 1]
             assert bool(member) == bool(drawn[i])
+
+
+@pytest.mark.parametrize("native", [False, True])
+@pytest.mark.parametrize("replacement", ["reservoir", "ring"])
+def test_keep_negatives_never_lets_positives_evict_failures(replacement, native):
+    """A full store under keep_negatives: positives replace only positives, so every negative
+    stays (without it, 2,000 positives leave about none of 5 negatives in a store of 50)."""
+    from skillchain_torch.options import native_initiation
+
+    if native and not native_initiation.AVAILABLE:
+        pytest.skip("compiled classifier not built")
+
+    def run(keep: bool) -> InitiationClassifier:
+        clf = InitiationClassifier(population=1, slots=1, capacity=50, sweeps=0,
+                                   replacement=replacement, keep_negatives=keep)
+        clf.set_native(native)
+        x = rand((2105, 4), 1)
+        clf.add_examples(0, 0, x[:20], torch.ones(20))           # a success
+        for i in range(5):                                        # five failures, then
+            clf.add_examples(0, 0, x[20 + i:21 + i], torch.zeros(1))
+        for chunk in torch.split(torch.arange(25, 2105), 80):     # many more successes
+            clf.add_examples(0, 0, x[chunk], torch.ones(len(chunk)))
+        return clf
+
+    kept = run(True)
+    assert int((~kept.labels[0, 0]).sum()) == 5 and kept.count.item() == 50
+    negatives = kept.examples[0, 0][~kept.labels[0, 0]]
+    expected = rand((2105, 4), 1)[20:25]
+    assert torch.equal(negatives[negatives[:, 0].argsort()], expected[expected[:, 0].argsort()])
+    assert int((~run(False).labels[0, 0]).sum()) <= 1
+    # a negative still replaces a positive once the store is full
+    kept.add_examples(0, 0, rand((1, 4), 2), torch.zeros(1))
+    assert int((~kept.labels[0, 0]).sum()) in (5, 6)  # 5 if its draw rejected it
+
+
+def test_keep_negatives_same_stores_torch_and_compiled_with_mixed_batches():
+    from skillchain_torch.options import native_initiation
+
+    if not native_initiation.AVAILABLE:
+        pytest.skip("compiled classifier not built")
+    stores = []
+    for native in (False, True):
+        clf = InitiationClassifier(population=2, slots=2, capacity=16, sweeps=0,
+                                   keep_negatives=True)
+        clf.set_native(native)
+        gen = torch.Generator().manual_seed(5)
+        for _ in range(30):
+            n = int(torch.randint(1, 12, (1,), generator=gen))
+            x = torch.rand(n, 4, dtype=F64, generator=gen)
+            labels = torch.rand(n, generator=gen) < 0.8
+            agents = torch.randint(0, 2, (n,), generator=gen)
+            clf.add_examples(agents, torch.randint(0, 2, (n,), generator=gen), x, labels)
+        stores.append(clf)
+    torch_path, compiled = stores
+    for name in ("examples", "labels", "count", "seen"):
+        assert torch.equal(getattr(torch_path, name), getattr(compiled, name)), name
+    assert int((~compiled.labels).sum()) > 0
