@@ -109,8 +109,8 @@ class TrainConfig:
     initiation_start: str = _DEFAULT.start
     initiation_constrain: str = _DEFAULT.constrain
     one_class_fits: bool = _DEFAULT.one_class_fits
-    failure_bootstrap: str = "decision"
-    keep_negatives: bool = False
+    failure_bootstrap: str = "primitives"
+    keep_negatives: bool = True
 
     @property
     def reading(self):

@@ -1,0 +1,167 @@
+"""The factorial screen of issue 15: skill-chaining readings against flat agents.
+
+Each cell is a ``skillchain train`` run (the screening seed block: seed 0, agents 0..runs-1),
+run two at a time (both cores), resumable (a finished cell is skipped, a partial one resumed
+from its checkpoint), each killed after ``--cell-timeout`` seconds (then reported as
+unfinished; rerun the script to resume it). Then every cell's per-run window means are
+compared with the flat cell's, and the table goes to ``results/screening/<instance>/README.md``
+with the raw arrays beside it.
+
+    python results/screening/screen.py --instance simple --runs 20 --episodes 100
+
+The cells: the initiation-set reading (first: ``pos0-everything-clearned``; local:
+``pos20-fitted-cstart``, ``pos250-fitted-cstart``), the failure bootstrap (``decision``,
+``primitives``) and whether stores keep negatives (``kn0``, ``kn1``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+MAPS = {"simple": "pinball_simple_single", "hard": "pinball_hard_two_starts"}
+READINGS = {
+    "first": ["--gestation-positives", "0", "--initiation-start", "everything",
+              "--initiation-constrain", "learned"],
+    "pos20": ["--gestation-positives", "20", "--initiation-start", "fitted",
+              "--initiation-constrain", "start"],
+    "pos250": ["--gestation-positives", "250", "--initiation-start", "fitted",
+               "--initiation-constrain", "start"],
+    # the first reading, but no fit until a slot holds both classes
+    "wait": ["--gestation-positives", "0", "--initiation-start", "everything",
+             "--initiation-constrain", "learned", "--wait-for-both-classes"],
+    # true everywhere through a positive intercept (centred features): failures carve
+    "biased": ["--gestation-positives", "0", "--initiation-start", "biased",
+               "--initiation-bias", "4", "--initiation-centered", "--initiation-constrain",
+               "learned"],
+}
+WINDOWS = ((1, 10), (11, 25), (26, 50), (51, 100), (101, 150), (151, 250))
+
+
+def cells(names: list[str]) -> dict[str, list[str]]:
+    """``{"flat": [...], "first-decision-kn0": [...], ...}``: each cell's CLI arguments."""
+    out = {}
+    for name in names:
+        if name == "flat":
+            out[name] = ["--agent", "flat"]
+            continue
+        reading, boot, kn = name.split("-")
+        out[name] = ["--agent", "skill-chaining", *READINGS[reading], "--failure-bootstrap", boot,
+                     "--keep-negatives", "on" if kn == "kn1" else "off"]
+    return out
+
+
+def run_cell(name, extra, args, runs_dir: Path) -> str:
+    out = runs_dir / name
+    if (out / "run_info.json").exists():
+        return f"{name}: done before"
+    exe = str(ROOT / ".venv" / "bin" / "skillchain")
+    if (out / "checkpoints").is_dir() and any((out / "checkpoints").iterdir()):
+        cmd = [exe, "train", "--resume", str(out), "--quiet"]
+    else:
+        cmd = [exe, "train", "--map", MAPS[args.instance], "--runs", str(args.runs),
+               "--episodes", str(args.episodes), "--seed", str(args.seed), "--out", str(out),
+               "--overwrite", "--quiet", *extra]
+    t = time.time()
+    log = open(runs_dir / f"{name}.log", "a")
+    try:
+        rc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT,
+                            timeout=args.cell_timeout).returncode
+    except subprocess.TimeoutExpired:
+        return f"{name}: stopped after {args.cell_timeout} s (rerun to resume)"
+    return f"{name}: rc {rc} in {time.time() - t:.0f} s"
+
+
+def ci(x: np.ndarray) -> tuple[float, float]:
+    return float(x.mean()), float(1.96 * x.std(ddof=1) / np.sqrt(len(x)))
+
+
+def welch(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Difference of means a - b with a Welch 95% interval (normal quantile)."""
+    d = a.mean() - b.mean()
+    return float(d), float(1.96 * np.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b)))
+
+
+def report(args, names, runs_dir: Path, out_dir: Path) -> str:
+    rows, arrays = [], {}
+    for name in names:
+        d = runs_dir / name
+        if not (d / "run_info.json").exists():
+            rows.append(f"| {name} | (unfinished) |")
+            continue
+        R = np.load(d / "returns.npy")
+        L = np.load(d / "lengths.npy")
+        arrays[name] = (R, L)
+        dest = out_dir / name
+        dest.mkdir(parents=True, exist_ok=True)
+        for f in ("config.json", "returns.npy", "lengths.npy", "n_options.npy", "run_info.json",
+                  "option_tree.json"):
+            if (d / f).exists():
+                shutil.copy(d / f, dest / f)
+    E = args.episodes
+    wins = [(a, b) for a, b in WINDOWS if b <= E]
+    head = "| cell | " + " | ".join(f"{a}-{b}" for a, b in wins) + \
+        " | longest episode | wall s |"
+    lines = [head, "|" + "---|" * (len(wins) + 3)]
+    flat = arrays.get("flat")
+    for name in names:
+        if name not in arrays:
+            lines.append(f"| {name} | (unfinished) |")
+            continue
+        R, L = arrays[name]
+        info = json.loads((runs_dir / name / "run_info.json").read_text())
+        cellv = []
+        for a, b in wins:
+            m, h = ci(R[:, a - 1:b].mean(1))
+            s = f"{m:,.0f} ± {h:,.0f}"
+            if flat is not None and name != "flat":
+                d, dh = welch(R[:, a - 1:b].mean(1), flat[0][:, a - 1:b].mean(1))
+                mark = " **" if d - dh > 0 else (" (worse)" if d + dh < 0 else "")
+                s += f"<br>{d:+,.0f} ± {dh:,.0f}{mark}"
+            cellv.append(s)
+        wall = info.get("wall_seconds", info.get("wall_time_s", float("nan")))
+        lines.append(f"| {name} | " + " | ".join(cellv) + f" | {int(L.max()):,} | {wall:.0f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--instance", choices=MAPS, default="simple")
+    p.add_argument("--runs", type=int, default=20)
+    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--cells", nargs="+", default=["flat"] + [
+        f"{r}-{b}-{k}" for r in READINGS for b in ("decision", "primitives")
+        for k in ("kn0", "kn1")])
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--cell-timeout", type=int, default=1800)
+    p.add_argument("--runs-dir", default=None)
+    p.add_argument("--report-only", action="store_true")
+    args = p.parse_args(argv)
+    tag = f"{args.instance}_P{args.runs}_E{args.episodes}_seed{args.seed}"
+    runs_dir = Path(args.runs_dir or ROOT / "runs" / "screen" / tag)
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    spec = cells(args.cells)
+    if not args.report_only:
+        with ThreadPoolExecutor(args.jobs) as pool:
+            for line in pool.map(lambda kv: run_cell(kv[0], kv[1], args, runs_dir),
+                                 spec.items()):
+                print(line, flush=True)
+    out_dir = ROOT / "results" / "screening" / tag
+    table = report(args, list(spec), runs_dir, out_dir)
+    (out_dir / "table.md").write_text(table + "\n")
+    print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
