@@ -34,14 +34,16 @@ OPTION_COLORS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple",
                  "tab:pink", "tab:olive", "tab:brown", "gold", "lime", "navy")  # fmt: skip
 
 
-def _single_agent(agent, p: int) -> HierarchicalAgent:
-    """A frozen, greedy copy of agent ``p`` of a population (P = 1)."""
+def _single_agent(agent, p: int, epsilon: float = 0.0, seed: int = 0) -> HierarchicalAgent:
+    """A frozen copy of agent ``p`` of a population (P = 1), greedy unless ``epsilon > 0``
+    (then both levels explore with it, drawing from stream ``seed``)."""
     if not isinstance(agent, HierarchicalAgent):
         raise TypeError("greedy_trajectory needs an agent with options (HierarchicalAgent)")
     # A plain HierarchicalAgent: the options as they are (no discovery, no refits), with the
     # no-overlap rule they were learned under.
     single = HierarchicalAgent(agent.bank.select_agents([p]), order=agent.order, alpha=0.0,
-                               gamma=agent.gamma, epsilon=0.0, option_epsilon=0.0,
+                               gamma=agent.gamma, epsilon=epsilon, option_epsilon=epsilon,
+                               seed=seed,
                                events=agent.events, max_option_steps=agent.max_option_steps,
                                overlap=True)
     with torch.no_grad():
@@ -54,11 +56,11 @@ def _single_agent(agent, p: int) -> HierarchicalAgent:
 
 @torch.no_grad()
 def greedy_trajectory(agent, p: int, map_name: str, max_steps: int = 2000,
-                      seed: int = 0) -> dict:  # fmt: skip
-    """Run agent ``p`` greedily for one episode; states ``[T + 1, 4]`` (raw), the option in
-    control at each step ``[T]`` (-1: a primitive decision), the return and whether it reached
-    the goal."""
-    single = _single_agent(agent, p)
+                      seed: int = 0, epsilon: float = 0.0) -> dict:  # fmt: skip
+    """Run agent ``p`` greedily (or ``epsilon``-greedily, as it behaved while training) for one
+    episode; states ``[T + 1, 4]`` (raw), the option in control at each step ``[T]`` (-1: a
+    primitive decision), the return and whether it reached the goal."""
+    single = _single_agent(agent, p, epsilon, seed)
     env = PinballEnv(map_name, batch_size=[1], max_episode_steps=max_steps, seed=seed)
     td = env.reset()
     states, options, total = [td["state"][0].clone()], [], 0.0
@@ -77,14 +79,20 @@ def greedy_trajectory(agent, p: int, map_name: str, max_steps: int = 2000,
         action = single.observe(nxt["observation"].to(torch.float64), reward)
         td = env.step_mdp(td)
     return {"states": torch.stack(states).numpy(), "options": np.array(options),
-            "return": total, "terminated": terminated, "agent": p}  # fmt: skip
+            "return": total, "terminated": terminated, "agent": p, "epsilon": epsilon}
 
 
-def best_greedy_trajectory(agent, map_name: str, agents=None, max_steps: int = 2000) -> dict:
-    """The best greedy episode among ``agents`` (default: all) for a Figure 4b: one that reaches
-    the goal, preferably through options, with the highest return."""
+def best_greedy_trajectory(agent, map_name: str, agents=None, max_steps: int = 2000,
+                           tries: int = 4) -> dict:  # fmt: skip
+    """The best episode among ``agents`` (default: all) for a Figure 4b ("a good example
+    solution"): one that reaches the goal, preferably through options, with the highest
+    return. Each agent runs greedily once, then ``tries - 1`` times with the training
+    epsilon (0.01, seeds 1, 2, ...): a greedy policy after few episodes often circles where
+    one exploratory step would free it."""
     agents = range(agent.population) if agents is None else agents
-    runs = [greedy_trajectory(agent, int(p), map_name, max_steps) for p in agents]
+    runs = [greedy_trajectory(agent, int(p), map_name, max_steps, seed=t,
+                              epsilon=0.0 if t == 0 else agent.epsilon)
+            for p in agents for t in range(tries)]
     return max(runs, key=lambda run: (run["terminated"], bool((run["options"] >= 0).any()),
                                       run["return"]))  # fmt: skip
 
@@ -108,7 +116,8 @@ def plot_option_trajectory(run: dict, map_name: str, ax=None, title: str | None 
                       label="primitive actions" if k < 0 else f"option {k}") for k in used]
     ax.legend(handles=handles, loc="lower left", fontsize=7, framealpha=0.8)
     steps = len(options)
-    ax.set_title(title or f"agent {run['agent']}: greedy solution, {steps} steps, "
+    kind = "greedy" if not run.get("epsilon") else f"epsilon {run['epsilon']:g}"
+    ax.set_title(title or f"agent {run['agent']}: {kind} solution, {steps} steps, "
                  f"return {run['return']:,.0f}", fontsize=9)  # fmt: skip
     return ax
 

@@ -91,20 +91,36 @@ def welch(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(d), float(1.96 * np.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b)))
 
 
+def load_cell(d: Path):
+    """``(returns, lengths, note)`` of a cell: the finished arrays, or the episodes every agent
+    completed by the last checkpoint of an unfinished run (``note`` says which)."""
+    if (d / "run_info.json").exists():
+        return np.load(d / "returns.npy"), np.load(d / "lengths.npy"), ""
+    checkpoints = sorted((d / "checkpoints").glob("ckpt_*.pt")) if d.is_dir() else []
+    if not checkpoints:
+        return None
+    import torch
+
+    state = torch.load(checkpoints[-1], weights_only=False, map_location="cpu")["trainer"]
+    R, L = np.asarray(state["returns"]), np.asarray(state["lengths"])
+    n = int((~np.isnan(R)).all(0).sum())
+    return R[:, :n], L[:, :n], f"stopped after {n} episodes"
+
+
 def report(args, names, runs_dir: Path, out_dir: Path) -> str:
-    rows, arrays = [], {}
+    arrays, notes = {}, {}
     for name in names:
         d = runs_dir / name
-        if not (d / "run_info.json").exists():
-            rows.append(f"| {name} | (unfinished) |")
+        cell = load_cell(d)
+        if cell is None or cell[0].shape[1] == 0:
             continue
-        R = np.load(d / "returns.npy")
-        L = np.load(d / "lengths.npy")
+        R, L, notes[name] = cell
         arrays[name] = (R, L)
         dest = out_dir / name
         dest.mkdir(parents=True, exist_ok=True)
-        for f in ("config.json", "returns.npy", "lengths.npy", "n_options.npy", "run_info.json",
-                  "option_tree.json"):
+        np.save(dest / "returns.npy", R)
+        np.save(dest / "lengths.npy", L)
+        for f in ("config.json", "n_options.npy", "run_info.json", "option_tree.json"):
             if (d / f).exists():
                 shutil.copy(d / f, dest / f)
     E = args.episodes
@@ -118,9 +134,13 @@ def report(args, names, runs_dir: Path, out_dir: Path) -> str:
             lines.append(f"| {name} | (unfinished) |")
             continue
         R, L = arrays[name]
-        info = json.loads((runs_dir / name / "run_info.json").read_text())
+        info_path = runs_dir / name / "run_info.json"
+        info = json.loads(info_path.read_text()) if info_path.exists() else {}
         cellv = []
         for a, b in wins:
+            if b > R.shape[1]:
+                cellv.append("")
+                continue
             m, h = ci(R[:, a - 1:b].mean(1))
             s = f"{m:,.0f} ± {h:,.0f}"
             if flat is not None and name != "flat":
@@ -129,7 +149,9 @@ def report(args, names, runs_dir: Path, out_dir: Path) -> str:
                 s += f"<br>{d:+,.0f} ± {dh:,.0f}{mark}"
             cellv.append(s)
         wall = info.get("wall_seconds", info.get("wall_time_s", float("nan")))
-        lines.append(f"| {name} | " + " | ".join(cellv) + f" | {int(L.max()):,} | {wall:.0f} |")
+        label = f"{name} ({notes[name]})" if notes[name] else name
+        wall = "-" if wall != wall else f"{wall:.0f}"  # (nan: unfinished)
+        lines.append(f"| {label} | " + " | ".join(cellv) + f" | {int(L.max()):,} | {wall} |")
     return "\n".join(lines)
 
 
