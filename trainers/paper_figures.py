@@ -107,20 +107,24 @@ def load_trained(run_dir: str | Path):
 
 def good_solutions(agent, map_name: str, agents=None, seeds=range(12),
                    max_steps: int = 3000) -> list[dict]:  # fmt: skip
-    """For each start state of the map, the best greedy episode among ``agents`` (default all)
-    that reaches the goal, preferring ones that use options; ``seeds`` pick the start."""
+    """For each start state of the map, the best episode among ``agents`` (default all) that
+    reaches the goal, preferring ones that use options; ``seeds`` pick the start. The first
+    seed runs greedily, the others with the agent's training epsilon (a greedy policy often
+    circles where one exploratory step frees it); the search stops once every start has a
+    solution through options."""
     agents = range(agent.population) if agents is None else agents
     by_start: dict[tuple, dict] = {}
-    for seed in seeds:
+    for i, seed in enumerate(seeds):
         for p in agents:
-            run = greedy_trajectory(agent, int(p), map_name, max_steps, seed=int(seed))
+            run = greedy_trajectory(agent, int(p), map_name, max_steps, seed=int(seed),
+                                    epsilon=0.0 if i == 0 else agent.epsilon)
             start = tuple(np.round(run["states"][0, :2], 4))
             key = (run["terminated"], bool((run["options"] >= 0).any()), run["return"])
             best = by_start.get(start)
             if best is None or key > best[0]:
                 by_start[start] = (key, run)
         if len(by_start) > 1 or "two" not in map_name:  # one start, or both seen
-            if all(v[0][0] for v in by_start.values()):
+            if all(v[0][0] and v[0][1] for v in by_start.values()):
                 break
     return [v[1] for _, v in sorted(by_start.items())]
 

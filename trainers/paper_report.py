@@ -239,6 +239,9 @@ def write_report(out: str | Path, names: list[str] | None = None, quiet: bool = 
         md += ["Runaway episodes:", ""] + _runaways(runs) + [""]
         if figures:
             md += _figures(out, instance, runs, quiet)
+    discussion = out / "DISCUSSION.md"  # hand-written: what differs from the paper, and why
+    if discussion.is_file():
+        md += [discussion.read_text().rstrip(), ""]
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     path = out / "README.md"
     path.write_text("\n".join(md) + "\n")
