@@ -133,8 +133,8 @@ class InitiationClassifier(nn.Module):
         self.config: dict[str, Any] = dict(
             population=population, slots=slots, degree=degree, lr=self.lr, sweeps=self.sweeps,
             capacity=capacity, distance=self.distance, distance_dims=list(dims),
-            replacement=replacement, keep_negatives=self.keep_negatives, balanced=self.balanced, initial_bias=float(initial_bias),
-            centered=bool(centered), dtype=dtype_name(dtype),
+            replacement=replacement, keep_negatives=self.keep_negatives, balanced=self.balanced,
+            initial_bias=float(initial_bias), centered=bool(centered), dtype=dtype_name(dtype),
         )  # fmt: skip
         self.initial_bias, self.centered = float(initial_bias), bool(centered)
         self.features = PolynomialFeatures(OBS_DIM, degree, dtype=dtype).to(device)
