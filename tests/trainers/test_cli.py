@@ -156,3 +156,23 @@ def test_torch_only_run_resumes_only_as_torch_only(tmp_path, capsys):
     if native_hierarchical.AVAILABLE:
         _fails(["train", "--resume", str(out), "--quiet"], capsys, "--torch-only")
     assert main(["train", "--resume", str(out), "--quiet", "--torch-only"]) == 0
+
+
+def test_failure_bootstrap_and_kept_negatives_flags_and_legacy_configs(tmp_path):
+    from skillchain_torch.trainers import TrainConfig
+    from skillchain_torch.trainers.cli import _config_from_args, build_parser
+
+    parser = build_parser()
+    args = parser.parse_args(["train", "--agent", "skill-chaining", "--failure-bootstrap",
+                              "decision", "--keep-negatives", "off", "--out", str(tmp_path)])
+    cfg = _config_from_args(parser, args)
+    assert (cfg.failure_bootstrap, cfg.keep_negatives) == ("decision", False)
+    default = TrainConfig()
+    assert (default.failure_bootstrap, default.keep_negatives) == ("primitives", True)
+    # A config saved before the fields existed ran with the old behaviour, whatever the default.
+    saved = {k: v for k, v in default.to_dict().items()
+             if k not in ("failure_bootstrap", "keep_negatives")}
+    old = TrainConfig.from_dict(saved)
+    assert (old.failure_bootstrap, old.keep_negatives) == ("decision", False)
+    with pytest.raises(ValueError, match="failure_bootstrap must be one of"):
+        TrainConfig(failure_bootstrap="optimistic").validate()
