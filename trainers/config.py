@@ -129,6 +129,7 @@ class TrainConfig:
 
     def validate(self) -> TrainConfig:
         """Raise ``ValueError`` naming the first impossible field; returns ``self``."""
+        from skillchain_torch.agents.hierarchical import FAILURE_BOOTSTRAPS
         from skillchain_torch.envs.pinball import MAP_NAMES
         from skillchain_torch.trainers.agents import AGENTS
 
@@ -145,10 +146,10 @@ class TrainConfig:
             ("slots", self.slots, self.slots >= 1, ">= 1"),
             ("initiation_bias", self.initiation_bias, math.isfinite(self.initiation_bias),
              "finite"),
+            ("failure_bootstrap", repr(self.failure_bootstrap),
+             self.failure_bootstrap in FAILURE_BOOTSTRAPS,
+             f"one of {', '.join(FAILURE_BOOTSTRAPS)}"),
         ]
-        if self.failure_bootstrap not in ("decision", "primitives"):
-            raise ValueError(f"failure_bootstrap must be one of decision, primitives, got "
-                             f"{self.failure_bootstrap!r}")  # fmt: skip
         if self.options_agent is not None:
             checks.append(("options_agent", self.options_agent, self.options_agent >= 0, ">= 0"))
         if self.alpha is not None:

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from skillchain_torch.trainers.paper_report import diff_ci, mean_ci
+
 ROOT = Path(__file__).resolve().parents[2]
 MAPS = {"simple": "pinball_simple_single", "hard": "pinball_hard_two_starts"}
 READINGS = {
@@ -81,16 +83,6 @@ def run_cell(name, extra, args, runs_dir: Path) -> str:
     return f"{name}: rc {rc} in {time.time() - t:.0f} s"
 
 
-def ci(x: np.ndarray) -> tuple[float, float]:
-    return float(x.mean()), float(1.96 * x.std(ddof=1) / np.sqrt(len(x)))
-
-
-def welch(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """Difference of means a - b with a Welch 95% interval (normal quantile)."""
-    d = a.mean() - b.mean()
-    return float(d), float(1.96 * np.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b)))
-
-
 def load_cell(d: Path):
     """``(returns, lengths, note)`` of a cell: the finished arrays, or the episodes every agent
     completed by the last checkpoint of an unfinished run (``note`` says which)."""
@@ -141,10 +133,10 @@ def report(args, names, runs_dir: Path, out_dir: Path) -> str:
             if b > R.shape[1]:
                 cellv.append("")
                 continue
-            m, h = ci(R[:, a - 1:b].mean(1))
+            m, h = mean_ci(R[:, a - 1:b].mean(1))
             s = f"{m:,.0f} ± {h:,.0f}"
             if flat is not None and name != "flat":
-                d, dh = welch(R[:, a - 1:b].mean(1), flat[0][:, a - 1:b].mean(1))
+                d, dh = diff_ci(R[:, a - 1:b].mean(1), flat[0][:, a - 1:b].mean(1))
                 mark = " **" if d - dh > 0 else (" (worse)" if d + dh < 0 else "")
                 s += f"<br>{d:+,.0f} ± {dh:,.0f}{mark}"
             cellv.append(s)

@@ -401,8 +401,8 @@ class HierarchicalAgent(nn.Module):
         self.duration = torch.where(stepped, self.duration + 1, self.duration)
         executing = self.option >= 0
         slot = self.option.clamp(min=0)
-        option_stops = executing & (reached.gather(1, slot[:, None])[:, 0]
-                                    | (self.duration >= self.max_option_steps))
+        hit = reached.gather(1, slot[:, None])[:, 0]  # the executing option's target at s'
+        option_stops = executing & (hit | (self.duration >= self.max_option_steps))
         decision_ended = stepped & (~executing | option_stops | ended)
         # Next top-level decision at s' (also the bootstrap decision d').
         phi_next, d_next = self._choose(next_obs, phi_next, contains_next, u[:, :2],
@@ -410,7 +410,7 @@ class HierarchicalAgent(nn.Module):
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
         if self.failure_bootstrap == "primitives":  # a timeout: the best primitive at s'
-            timed_out = option_stops & ~reached.gather(1, slot[:, None])[:, 0]
+            timed_out = option_stops & ~hit
             best = self.last_q[:, :NUM_PRIMITIVES].max(1).values
             q_next = torch.where(timed_out, best, q_next)
         smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,

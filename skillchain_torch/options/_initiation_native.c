@@ -373,7 +373,8 @@ static Stores make_stores(unsigned long long seeds_p, unsigned long long gen_p, 
                           unsigned long long t_p)
 {
     Stores st = {(const int64_t *)(uintptr_t)seeds_p, (const int64_t *)(uintptr_t)gen_p,
-                 (uint64_t)salt, ring & 1, (ring >> 1) & 1, (int64_t *)(uintptr_t)seen_p, (int64_t *)(uintptr_t)cnt_p,
+                 (uint64_t)salt, ring & 1, (ring >> 1) & 1, (int64_t *)(uintptr_t)seen_p,
+                 (int64_t *)(uintptr_t)cnt_p,
                  (double *)(uintptr_t)ex_p, (uint8_t *)(uintptr_t)lab_p,
                  (uint8_t *)(uintptr_t)t_p};
     return st;
