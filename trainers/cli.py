@@ -67,6 +67,11 @@ CONFIG_OPTIONS = (
     "one_class_fits",
     "failure_bootstrap",
     "keep_negatives",
+    "policy_start",
+    "value_start",
+    "value_bonus",
+    "option_alpha",
+    "completion_reward",
 )
 
 
@@ -194,6 +199,39 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="what a timed-out option execution's SMDP target bootstraps on: the next "
         "decision (Sarsa, the paper) or the best primitive at s'",
+    )
+    train.add_argument(
+        "--policy-start",
+        choices=("zero", "top-level"),
+        default=None,
+        help="how a new option's policy starts when it joins: zero weights updated off-policy "
+        "in gestation, or the agent's own primitive values projected onto the option's basis",
+    )
+    train.add_argument(
+        "--value-start",
+        choices=("max-sample", "agent"),
+        default=None,
+        help="how Q(s, o) starts when an option joins: the best value sampled when its target "
+        "fired in gestation, everywhere (the paper), or the agent's own max_a Q(s, a) fitted in "
+        "its basis plus --value-bonus",
+    )
+    train.add_argument(
+        "--value-bonus",
+        type=float,
+        default=None,
+        help="added to Q(s, o) everywhere under --value-start agent (default 0)",
+    )
+    train.add_argument(
+        "--option-alpha",
+        type=float,
+        default=None,
+        help="the options' Q-learning step size (default: the paper's 0.0005)",
+    )
+    train.add_argument(
+        "--completion-reward",
+        type=float,
+        default=None,
+        help="added to an option's reward when its target fires (default 10000)",
     )
     train.add_argument(
         "--checkpoint-every",

@@ -28,15 +28,29 @@ from typing import Any
 from skillchain_torch.discovery.readings import DEFAULT_READING as _DEFAULT
 from skillchain_torch.discovery.readings import InitiationReading
 
-__all__ = ["TrainConfig", "paper_defaults", "RESUME_FIELDS", "LEGACY_FIELDS"]
+__all__ = ["TrainConfig", "paper_defaults", "RESUME_FIELDS", "LEGACY_FIELDS", "UNREAD_FIELDS"]
 
 # Fields added after runs were published, with the behaviour every run before them had: a
 # saved config without one of them ran with this value (whatever today's default is).
-LEGACY_FIELDS = {"failure_bootstrap": "decision", "keep_negatives": False}
+LEGACY_FIELDS = {"failure_bootstrap": "decision", "keep_negatives": False, "policy_start": "zero",
+                 "value_start": "max-sample", "value_bonus": 0.0}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
 RESUME_FIELDS = ("checkpoint_every", "device")
+
+# Fields an agent kind never reads: a saved run of that kind does not differ from a config that
+# changes them (so a flat run stays valid when a skill-chaining default changes).
+_DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestation_positives",
+                     "initiation_start", "initiation_constrain", "one_class_fits",
+                     "keep_negatives", "policy_start", "value_start", "value_bonus",
+                     "option_alpha")
+UNREAD_FIELDS = {
+    "flat": _DISCOVERY_FIELDS + ("options", "options_agent", "failure_bootstrap",
+                                 "completion_reward"),
+    "given-options": _DISCOVERY_FIELDS,
+    "skill-chaining": ("options", "options_agent"),
+}
 
 
 def paper_defaults(map_name: str) -> tuple[int, float]:
@@ -82,6 +96,13 @@ class TrainConfig:
         keep_negatives: the initiation classifiers' stores never drop a failure to make room
             for a success's positives (see :class:`~skillchain_torch.options.
             InitiationClassifier`).
+        policy_start: how a joining option's policy starts (``"zero"``: gestation's updates of
+            zero weights; ``"top-level"``: the agent's own primitive values projected onto the
+            option's basis; see :class:`~skillchain_torch.discovery.SkillChaining`).
+        option_alpha: the options' Q-learning step size (paper: ``alpha_o = 0.0005``); given
+            options keep the step size of the run that discovered them.
+        completion_reward: ``C``, added to an option's reward when its target fires (the paper
+            does not give it; 10,000 is the task's goal reward).
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -111,6 +132,11 @@ class TrainConfig:
     one_class_fits: bool = _DEFAULT.one_class_fits
     failure_bootstrap: str = "primitives"
     keep_negatives: bool = True
+    policy_start: str = "zero"
+    option_alpha: float = 0.0005
+    completion_reward: float = 10_000.0
+    value_start: str = "max-sample"
+    value_bonus: float = 0.0
 
     @property
     def reading(self):
@@ -130,6 +156,7 @@ class TrainConfig:
     def validate(self) -> TrainConfig:
         """Raise ``ValueError`` naming the first impossible field; returns ``self``."""
         from skillchain_torch.agents.hierarchical import FAILURE_BOOTSTRAPS
+        from skillchain_torch.discovery.gestation import POLICY_STARTS, VALUE_STARTS
         from skillchain_torch.envs.pinball import MAP_NAMES
         from skillchain_torch.trainers.agents import AGENTS
 
@@ -149,6 +176,15 @@ class TrainConfig:
             ("failure_bootstrap", repr(self.failure_bootstrap),
              self.failure_bootstrap in FAILURE_BOOTSTRAPS,
              f"one of {', '.join(FAILURE_BOOTSTRAPS)}"),
+            ("value_bonus", self.value_bonus, math.isfinite(self.value_bonus), "finite"),
+            ("option_alpha", self.option_alpha,
+             math.isfinite(self.option_alpha) and self.option_alpha >= 0, ">= 0 and finite"),
+            ("completion_reward", self.completion_reward,
+             math.isfinite(self.completion_reward), "finite"),
+            ("value_start", repr(self.value_start), self.value_start in VALUE_STARTS,
+             f"one of {', '.join(VALUE_STARTS)}"),
+            ("policy_start", repr(self.policy_start), self.policy_start in POLICY_STARTS,
+             f"one of {', '.join(POLICY_STARTS)}"),
         ]
         if self.options_agent is not None:
             checks.append(("options_agent", self.options_agent, self.options_agent >= 0, ">= 0"))
@@ -211,6 +247,9 @@ class TrainConfig:
             raise ValueError(f"{path}: {err}") from None
 
     def mismatches(self, other: TrainConfig) -> list[str]:
-        """Fields (outside ``RESUME_FIELDS``) whose values differ between two resolved configs."""
+        """Fields whose values differ between two resolved configs, leaving out
+        ``RESUME_FIELDS`` and, when both are of one agent kind, the fields that kind never
+        reads (``UNREAD_FIELDS``)."""
         a, b = self.resolved().to_dict(), other.resolved().to_dict()
-        return [k for k in a if k not in RESUME_FIELDS and a[k] != b[k]]
+        unread = UNREAD_FIELDS.get(self.agent, ()) if self.agent == other.agent else ()
+        return [k for k in a if k not in RESUME_FIELDS and k not in unread and a[k] != b[k]]

@@ -68,5 +68,5 @@ class GivenOptionsAgent(HierarchicalAgent):
                          scale_step_size=cfg.scale_step_size, device=device,
                          failure_bootstrap=cfg.failure_bootstrap,
                          overlap=True,  # as the options were learned (no-op if unrelated)
-                         native=native)
+                         completion_reward=cfg.completion_reward, native=native)
         self.config = cfg

@@ -38,6 +38,7 @@ class SkillChainingRunAgent(SkillChainingAgent):
 
         # Class-balanced initiation-set fits: see SkillChainingAgent.build.
         bank = OptionBank.build(cfg.runs, cfg.slots, seed=cfg.seed, device=device, balanced=True,
+                                alpha=cfg.option_alpha,
                                 initial_bias=cfg.initiation_bias,
                                 keep_negatives=cfg.keep_negatives,
                                 centered=cfg.initiation_centered)  # fmt: skip
@@ -45,5 +46,7 @@ class SkillChainingRunAgent(SkillChainingAgent):
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device,
                          failure_bootstrap=cfg.failure_bootstrap, native=native,
-                         reading=cfg.reading)
+                         reading=cfg.reading, policy_start=cfg.policy_start,
+                         value_start=cfg.value_start, value_bonus=cfg.value_bonus,
+                         completion_reward=cfg.completion_reward)
         self.config = cfg

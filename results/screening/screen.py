@@ -11,7 +11,10 @@ with the raw arrays beside it.
 
 The cells: the initiation-set reading (first: ``pos0-everything-clearned``; local:
 ``pos20-fitted-cstart``, ``pos250-fitted-cstart``), the failure bootstrap (``decision``,
-``primitives``) and whether stores keep negatives (``kn0``, ``kn1``).
+``primitives``) and whether stores keep negatives (``kn0``, ``kn1``); optional suffixes
+``-top`` (a joining option's policy starts as the agent's own, ``--policy-start top-level``)
+``-agN`` (``Q(s, o)`` starts as the agent's state value plus N, ``--value-start agent``),
+``-oaX`` (``--option-alpha X``) and ``-CX`` (``--completion-reward X``).
 """
 
 from __future__ import annotations
@@ -56,9 +59,20 @@ def cells(names: list[str]) -> dict[str, list[str]]:
         if name == "flat":
             out[name] = ["--agent", "flat"]
             continue
-        reading, boot, kn = name.split("-")
+        reading, boot, kn, *starts = name.split("-")
         out[name] = ["--agent", "skill-chaining", *READINGS[reading], "--failure-bootstrap", boot,
                      "--keep-negatives", "on" if kn == "kn1" else "off"]
+        for part in starts:  # "top": the policy starts as the agent's; "agN": Q(s, o) = V + N
+            if part == "top":
+                out[name] += ["--policy-start", "top-level"]
+            elif part.startswith("ag"):
+                out[name] += ["--value-start", "agent", "--value-bonus", part[2:] or "0"]
+            elif part.startswith("oa"):  # e.g. oa0: option step size 0
+                out[name] += ["--option-alpha", part[2:]]
+            elif part.startswith("C"):  # e.g. C0: completion reward 0
+                out[name] += ["--completion-reward", part[1:]]
+            else:
+                raise ValueError(f"cell {name!r}: unknown part {part!r} (top, agN, oaX, CX)")
     return out
 
 

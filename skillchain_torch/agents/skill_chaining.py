@@ -61,6 +61,8 @@ class SkillChainingAgent(HierarchicalAgent):
             :class:`~skillchain_torch.discovery.SkillChaining`.
         reading: the initiation-set reading (:class:`~skillchain_torch.discovery.
             InitiationReading`; default the first one, true everywhere until the first fit).
+        policy_start: ``"zero"`` or ``"top-level"``: how a joining option's policy starts
+            (see :class:`~skillchain_torch.discovery.SkillChaining`).
         **kwargs: the :class:`HierarchicalAgent` arguments (``order``, ``alpha``, ``gamma``,
             ``epsilon``, ``seed``, ``option_epsilon``, ``max_option_steps``, ...).
 
@@ -76,7 +78,9 @@ class SkillChainingAgent(HierarchicalAgent):
                  convergence_threshold: float = CONVERGENCE_THRESHOLD,
                  convergence_episodes: int = CONVERGENCE_EPISODES, overlap: bool = True,
                  wait_for_both_classes: bool = False,
-                 reading: InitiationReading = FIRST_READING, **kwargs):  # fmt: skip
+                 reading: InitiationReading = FIRST_READING, policy_start: str = "zero",
+                 value_start: str = "max-sample", value_bonus: float = 0.0,
+                 **kwargs):  # fmt: skip
         super().__init__(bank, events=events, **kwargs)
         self.discovery = SkillChaining(
             self.bank, self.events, gestation=gestation, max_branching=max_branching,
@@ -84,6 +88,8 @@ class SkillChainingAgent(HierarchicalAgent):
             convergence_episodes=convergence_episodes,
             max_option_steps=kwargs.get("max_option_steps", MAX_OPTION_STEPS), overlap=overlap,
             wait_for_both_classes=wait_for_both_classes, reading=reading,
+            policy_start=policy_start, value_start=value_start, value_bonus=value_bonus,
+            top_basis=self.features,
         )  # fmt: skip
         # Q(s, d) of the decision d in force at the current state s, valued when s was reached
         # (before that step's update): the samples of gestation.

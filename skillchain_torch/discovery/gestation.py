@@ -15,6 +15,20 @@ initialized Q(s, o) to the maximum of these values."
   (coefficient vector 0), so "initialised to a value" means that weight set to it and the
   others to 0: ``Q(s, o) = value`` everywhere.
 
+Two starts the paper does not have, each a parameter of
+:class:`~skillchain_torch.discovery.SkillChaining` (``results/screening/README.md`` measures
+them):
+
+* ``policy_start="top-level"``: the option's policy starts as the agent's own. Its Q-head is the
+  least-squares fit, in its order-3 basis, of the agent's order-4 primitive values
+  (:func:`value_projection`, :func:`initialise_option_policies`), as deep skill chaining copies
+  the global agent's weights into a new option. Its first executions then head where the agent
+  heads, instead of where zero weights and ten episodes of off-policy updates point.
+* ``value_start="agent"``: ``Q(s, o)`` starts as the agent's own state value ``max_a Q(s, a)``
+  (fitted in its basis, :class:`StateValueFit`) plus a bonus, so the option is tried where it
+  is believed about as good as the primitives, not everywhere at the best value seen at its
+  target.
+
 Example:
     >>> import torch
     >>> from skillchain_torch.modules import LinearQHead
@@ -30,13 +44,29 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from skillchain_torch.features import FourierBasis
+from skillchain_torch.invariant import rowwise_dot
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import OptionBank, OptionStatus
 
-__all__ = ["GESTATION_EPISODES", "RecentStates", "gestation_over", "initialise_option_values"]
+__all__ = ["GESTATION_EPISODES", "POLICY_STARTS", "VALUE_STARTS", "RecentStates", "StateValueFit",
+           "cached_projection", "gestation_over", "initialise_option_policies",
+           "initialise_option_values", "state_value_fit", "value_projection"]
 
 GESTATION_EPISODES = 10
 NUM_PRIMITIVES = 5
+# How an option's policy starts when it joins: "zero" (the paper is silent; whatever gestation's
+# off-policy updates made of zero weights) or "top-level" (the agent's own primitive values
+# projected onto the option's basis, as deep skill chaining copies the global agent's weights).
+POLICY_STARTS = ("zero", "top-level")
+# How Q(s, o) starts when the option joins: "max-sample" (the paper: the best Q(s, d) sampled
+# when the target fired in gestation, everywhere) or "agent" (the agent's own state value
+# max_a Q(s, a) over the primitives, fitted in its basis, plus ``value_bonus``).
+VALUE_STARTS = ("max-sample", "agent")
+# The Pinball observation box (positions in [0, 1], velocities scaled into
+# [(1 - sqrt 2) / 2, (1 + sqrt 2) / 2]); the projection's grid spans it.
+_OBS_LOW = (0.0, 0.0, (1.0 - 2.0**0.5) / 2.0, (1.0 - 2.0**0.5) / 2.0)
+_OBS_HIGH = (1.0, 1.0, (1.0 + 2.0**0.5) / 2.0, (1.0 + 2.0**0.5) / 2.0)
 
 
 def gestation_over(bank: OptionBank, episode: Tensor, ended: Tensor,
@@ -122,3 +152,115 @@ class RecentStates:
         device = self.steps.device
         self.states = state["states"].to(device).clone()
         self.steps = state["steps"].to(device).clone()
+
+
+def value_projection(top: FourierBasis, option: FourierBasis, points: int = 7,
+                     low: tuple[float, ...] = _OBS_LOW,
+                     high: tuple[float, ...] = _OBS_HIGH) -> Tensor:  # fmt: skip
+    """``[F_option, F_top]``: least-squares map from top-level weights to option weights.
+
+    A linear value ``w . phi_top(s)`` is fitted by ``(M w) . phi_option(s)`` over a regular grid
+    of ``points ** dim`` states spanning the box ``[low, high]`` (uniform weight over the
+    observation space). Deterministic: no random numbers are drawn.
+
+    Example:
+        >>> from skillchain_torch.features import FourierBasis
+        >>> M = value_projection(FourierBasis(4, 2), FourierBasis(4, 1), points=4)
+        >>> M.shape
+        torch.Size([16, 81])
+        >>> w = torch.zeros(81, dtype=torch.float64); w[0] = 3.0      # a constant 3
+        >>> round(float((M @ w)[0]), 9), round(float((M @ w)[1:].abs().max()), 9)
+        (3.0, 0.0)
+    """
+    if top.dim != option.dim or len(low) != top.dim or len(high) != top.dim or points < 2:
+        raise ValueError(f"value_projection needs bases of one dimension matching low/high "
+                         f"and points >= 2, got dims {top.dim}, {option.dim}, points {points}")
+    dtype = top.coefficients.dtype
+    axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
+    grid = torch.cartesian_prod(*axes).to(top.coefficients.device)
+    pinv, phi_top = torch.linalg.pinv(option(grid)), top(grid).T.contiguous()  # [Fo, N], [Ft, N]
+    # pinv (an SVD) and rowwise_dot give the same bits on every call; lstsq and matmul did not
+    # (their rounding varies with the call and the operands' addresses).
+    rows = [rowwise_dot(chunk[:, None, :], phi_top[None]) for chunk in pinv.split(8)]
+    return torch.cat(rows)
+
+
+_PROJECTIONS: dict[tuple, Tensor] = {}
+
+
+def cached_projection(top: FourierBasis, option: FourierBasis) -> Tensor:
+    """:func:`value_projection` with its defaults, computed once per process and basis pair
+    (a few seconds at orders 4 and 3); the result is the same bits every time."""
+    key = (top.dim, top.order, option.order, top.coefficients.dtype, str(top.coefficients.device))
+    if key not in _PROJECTIONS:
+        _PROJECTIONS[key] = value_projection(top, option)
+    return _PROJECTIONS[key]
+
+
+@torch.no_grad()
+def initialise_option_policies(option_head, q_head: LinearQHead, mask: Tensor,
+                               projection: Tensor,
+                               num_primitives: int = NUM_PRIMITIVES) -> None:  # fmt: skip
+    """Option ``k`` of agent ``p`` (``mask [P, K]``) starts from agent p's primitive values.
+
+    ``option_head.weight[p, k, a] = projection @ q_head.weight[p, a]`` for every primitive a:
+    the option's greedy policy starts as (the option basis's best fit of) the agent's own. A
+    goal option's reward is the task's plus its completion reward, so the agent's values are
+    its values up to that bonus; a chained option's target lies on the agent's way to the goal.
+    Each (p, k) is computed alone, so an agent's weights do not depend on the population.
+
+    Example:
+        >>> from skillchain_torch.features import FourierBasis
+        >>> from skillchain_torch.options import FourierOptionQHead
+        >>> top, opt = FourierBasis(4, 2), FourierOptionQHead(1, 2, order=1)
+        >>> head = LinearQHead(num_features=81, num_decisions=5 + 2, population=1)
+        >>> head.weight.data[0, 3, 0] = 4.0                       # Q(s, a=3) = 4 everywhere
+        >>> M = value_projection(top, opt.basis, points=4)
+        >>> initialise_option_policies(opt, head, torch.tensor([[False, True]]), M)
+        >>> opt(torch.full((1, 4), 0.3, dtype=torch.float64))[0].round(decimals=6).tolist()
+        [[0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 4.0, 0.0]]
+    """
+    weight = option_head.weight  # [P, K, A, F_option]
+    top = q_head.weight[:, :num_primitives, :]  # [P, A, F_top]
+    for p, k in mask.nonzero().tolist():
+        # rowwise_dot, not a BLAS matmul: BLAS rounds differently with the operand's address
+        # (agent p's offset in the population), and agents must not depend on the population.
+        w = rowwise_dot(top[p].to(projection.dtype)[:, None, :], projection[None])  # [A, F_o]
+        weight[p, k] = w.to(weight.dtype)
+
+
+class StateValueFit:
+    """Fit ``max_a Q(s, a)`` over the primitives as one linear value in the agent's basis.
+
+    The fit is least squares over the same regular grid as :func:`value_projection`; its
+    pseudo-inverse is computed once. :meth:`__call__` returns ``[F]`` weights for one agent.
+
+    Example:
+        >>> from skillchain_torch.features import FourierBasis
+        >>> fit = StateValueFit(FourierBasis(4, 1), points=3)
+        >>> w = torch.zeros(5, 16, dtype=torch.float64); w[2, 0] = 5.0; w[4, 0] = 7.0
+        >>> round(float(fit(w)[0]), 9), round(float(fit(w)[1:].abs().max()), 9)
+        (7.0, 0.0)
+    """
+
+    def __init__(self, basis: FourierBasis, points: int = 7,
+                 low: tuple[float, ...] = _OBS_LOW,
+                 high: tuple[float, ...] = _OBS_HIGH):  # fmt: skip
+        dtype = basis.coefficients.dtype
+        axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
+        grid = torch.cartesian_prod(*axes).to(basis.coefficients.device)
+        self.phi = basis(grid)  # [N, F]
+        self.pinv = torch.linalg.pinv(self.phi)  # [F, N]
+
+    def __call__(self, primitive_weights: Tensor) -> Tensor:
+        """``[F]`` weights of the fitted ``max_a Q(s, a)`` from ``[A, F]`` primitive weights."""
+        # rowwise_dot, not matmul: the same bits whatever the weights' address (see
+        # initialise_option_policies).
+        w = primitive_weights.to(self.phi.dtype).contiguous()
+        values = rowwise_dot(self.phi[:, None, :], w[None]).amax(-1)  # [N]
+        return rowwise_dot(self.pinv, values[None, :])
+
+
+def state_value_fit(basis: FourierBasis, points: int = 7) -> StateValueFit:
+    """A :class:`StateValueFit` over ``basis`` (``points ** dim`` grid states)."""
+    return StateValueFit(basis, points)

@@ -55,7 +55,17 @@ from .convergence import CONVERGENCE_EPISODES, CONVERGENCE_THRESHOLD, Convergenc
 from .creation import choose_creation, covered_start
 from .events import MAX_BRANCHING, entered, evaluate_base_events, event_list, target_indicator
 from .executions import ExecutionTrace, execution_outcome
-from .gestation import GESTATION_EPISODES, RecentStates, gestation_over, initialise_option_values
+from .gestation import (
+    GESTATION_EPISODES,
+    POLICY_STARTS,
+    VALUE_STARTS,
+    RecentStates,
+    cached_projection,
+    gestation_over,
+    initialise_option_policies,
+    initialise_option_values,
+    state_value_fit,
+)
 from .overlap import exclude_overlap, overlap_exclusion
 from .readings import FIRST_READING, InitiationReading
 
@@ -104,6 +114,18 @@ class SkillChaining:
             20 agents of the first reading: options whose executions never succeeded stayed
             available everywhere with their optimistic Q(s, o), and agents spent episodes of
             20,000-35,000 steps re-running them.
+        policy_start: how a joining option's policy starts (:data:`~.gestation.POLICY_STARTS`):
+            ``"zero"`` keeps what gestation's off-policy updates made of zero weights (the
+            paper is silent); ``"top-level"`` sets it to the agent's own primitive values
+            projected onto the option's basis (:func:`~.gestation.initialise_option_policies`),
+            as deep skill chaining starts options from the global agent. Needs ``top_basis``
+            and a Fourier option head.
+        value_start: how ``Q(s, o)`` starts when the option joins
+            (:data:`~.gestation.VALUE_STARTS`): ``"max-sample"`` (the paper: the best value
+            sampled when its target fired in gestation, everywhere) or ``"agent"`` (the agent's
+            own ``max_a Q(s, a)`` fitted in its basis, plus ``value_bonus``). Needs ``top_basis``.
+        value_bonus: added to ``Q(s, o)`` everywhere under ``value_start="agent"``.
+        top_basis: the agent's top-level :class:`~skillchain_torch.features.FourierBasis`.
     """
 
     def __init__(
@@ -118,7 +140,27 @@ class SkillChaining:
         overlap: bool = True,
         wait_for_both_classes: bool = False,
         reading: InitiationReading = FIRST_READING,
+        policy_start: str = "zero",
+        value_start: str = "max-sample",
+        value_bonus: float = 0.0,
+        top_basis=None,
     ):
+        if value_start not in VALUE_STARTS:
+            raise ValueError(f"value_start must be one of {', '.join(VALUE_STARTS)}, "
+                             f"got {value_start!r}")  # fmt: skip
+        if value_start == "agent" and top_basis is None:
+            raise ValueError("value_start 'agent' needs the agent's Fourier basis (top_basis)")
+        self.value_start, self.value_bonus = value_start, float(value_bonus)
+        self._value_fit = None
+        if policy_start not in POLICY_STARTS:
+            raise ValueError(f"policy_start must be one of {', '.join(POLICY_STARTS)}, "
+                             f"got {policy_start!r}")  # fmt: skip
+        if policy_start == "top-level" and (top_basis is None
+                                            or getattr(bank.q_head, "basis", None) is None):
+            raise ValueError("policy_start 'top-level' needs the agent's Fourier basis "
+                             "(top_basis) and a Fourier option head (FourierOptionQHead)")
+        self.policy_start, self.top_basis = policy_start, top_basis
+        self._projection: Tensor | None = None
         if gestation < 0 or max_branching < 1 or max_option_steps < 1:
             raise ValueError("need gestation >= 0, max_branching >= 1, max_option_steps >= 1")
         self.bank = bank
@@ -377,6 +419,12 @@ class SkillChaining:
             value = torch.nan_to_num(self.gestation_q, neginf=0.0)
             bank.set_status(join, OptionStatus.LEARNING)
             initialise_option_values(q_head, join, value)
+            if self.value_start == "agent":
+                self._agent_values(q_head, join)
+            if self.policy_start == "top-level":
+                if self._projection is None:  # once per run: a fixed grid, no random numbers
+                    self._projection = cached_projection(self.top_basis, bank.q_head.basis)
+                initialise_option_policies(bank.q_head, q_head, join, self._projection)
             for p, k in join.nonzero().tolist():
                 self._emit("joined", p, k, target=self.target_name(p, k),
                            value=float(value[p, k]))  # fmt: skip
@@ -384,6 +432,17 @@ class SkillChaining:
         self.episode_weights = torch.where(rows[:, None, None], classifier.snapshot(),
                                            self.episode_weights)  # fmt: skip
         self.fitted = self.fitted & ~rows[:, None]
+
+    @torch.no_grad()
+    def _agent_values(self, q_head: LinearQHead, join: Tensor) -> None:
+        """``Q(s, o) = max_a Q(s, a) + value_bonus`` (fitted) for the options in ``join``."""
+        if self._value_fit is None:  # once per run: a fixed grid, no random numbers
+            self._value_fit = state_value_fit(self.top_basis)
+        primitives = q_head.weight.shape[1] - self.bank.slots
+        for p, k in join.nonzero().tolist():
+            w = self._value_fit(q_head.weight[p, :primitives])
+            w[0] += self.value_bonus
+            q_head.weight[p, primitives + k] = w.to(q_head.weight.dtype)
 
     def _start_sets(self, join: Tensor) -> None:
         """The initiation sets of the options in ``join [P, K]`` as gestation ends, by the
@@ -459,4 +518,4 @@ class SkillChaining:
                 f"gestation={self.gestation}, max_branching={self.max_branching}, "
                 f"convergence={self.convergence.threshold}x{self.convergence.episodes}, "
                 f"max_option_steps={self.max_option_steps}, overlap={self.overlap}, "
-                f"reading={self.reading.name})")
+                f"reading={self.reading.name}, policy_start={self.policy_start!r})")

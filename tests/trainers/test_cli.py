@@ -176,3 +176,18 @@ def test_failure_bootstrap_and_kept_negatives_flags_and_legacy_configs(tmp_path)
     assert (old.failure_bootstrap, old.keep_negatives) == ("decision", False)
     with pytest.raises(ValueError, match="failure_bootstrap must be one of"):
         TrainConfig(failure_bootstrap="optimistic").validate()
+
+
+def test_option_start_and_learning_flags_reach_the_config(tmp_path):
+    from skillchain_torch.trainers.cli import _config_from_args, build_parser
+
+    parser = build_parser()
+    args = parser.parse_args(["train", "--agent", "skill-chaining", "--policy-start",
+                              "top-level", "--value-start", "agent", "--value-bonus", "3",
+                              "--option-alpha", "0", "--completion-reward", "500",
+                              "--out", str(tmp_path)])
+    cfg = _config_from_args(parser, args)
+    assert (cfg.policy_start, cfg.value_start, cfg.value_bonus) == ("top-level", "agent", 3.0)
+    assert (cfg.option_alpha, cfg.completion_reward) == (0.0, 500.0)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["train", "--policy-start", "copy"])

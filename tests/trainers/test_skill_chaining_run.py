@@ -21,15 +21,17 @@ KERNELS = [False, True] if native_hierarchical.AVAILABLE else [False]
 BOX = dict(agent="skill-chaining", map="pinball_box", max_episode_steps=300, slots=4)
 
 
-def trainer_for(runs, seed, episodes=8, gestation=2, native=None, **kwargs):
+def trainer_for(runs, seed, episodes=8, gestation=2, native=None, starts=None, **kwargs):
     """A trainer whose agents gestate 2 episodes, so options join and learn in a short run
-    (``native``: the agent's compiled kernels, default when built)."""
+    (``native``: the agent's compiled kernels, default when built; ``starts``: the agent's
+    ``policy_start`` / ``value_start`` / ``value_bonus``)."""
     config = TrainConfig(runs=runs, seed=seed, episodes=episodes, **{**BOX, **kwargs})
     trainer = PopulationTrainer(config, **({"out_dir": kwargs.pop("out_dir")}
                                            if "out_dir" in kwargs else {}))  # fmt: skip
     bank = OptionBank.build(runs, config.slots, seed=seed)
     trainer.agent = SkillChainingAgent(bank, order=4, alpha=0.001, seed=seed,
-                                       gestation=gestation, native=native)  # fmt: skip
+                                       gestation=gestation, native=native,
+                                       **(starts or {}))  # fmt: skip
     return trainer
 
 
@@ -51,6 +53,22 @@ def test_agent_alone_equals_agent_in_population(native):
                            population.agent.bank.q_head.weight[p])
         assert torch.equal(alone.agent.bank.classifier.weight[0],
                            population.agent.bank.classifier.weight[p])
+        assert torch.equal(alone.agent.q_head.weight[0], population.agent.q_head.weight[p])
+
+
+@pytest.mark.slow
+def test_agent_and_top_level_starts_keep_agents_independent():
+    starts = dict(policy_start="top-level", value_start="agent", value_bonus=50.0)
+    population = trainer_for(3, seed=5, starts=starts).train()
+    joined = population.agent.bank.status >= OptionStatus.LEARNING
+    assert joined.any()
+    p, k = joined.nonzero()[0].tolist()
+    assert population.agent.bank.q_head.weight[p, k].abs().max() > 0
+    for p in range(3):
+        alone = trainer_for(1, seed=5 + p, starts=starts).train()
+        assert np.array_equal(alone.returns[0], population.returns[p])
+        assert torch.equal(alone.agent.bank.q_head.weight[0],
+                           population.agent.bank.q_head.weight[p])
         assert torch.equal(alone.agent.q_head.weight[0], population.agent.q_head.weight[p])
 
 

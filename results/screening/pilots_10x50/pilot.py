@@ -5,9 +5,14 @@ from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 import functools
 from skillchain_torch.options import OptionBank
 args0 = dict(a.split("=") for a in sys.argv[1:])
+_over = {}
 if "cap" in args0:
+    _over["capacity"] = int(args0["cap"])
+if "oalpha" in args0:  # the options' Q-learning step size (paper 0.0005)
+    _over["alpha"] = float(args0["oalpha"])
+if _over:
     _b = OptionBank.build.__func__
-    OptionBank.build = classmethod(lambda cls, *a, **k: _b(cls, *a, **{**k, "capacity": int(args0["cap"])}))
+    OptionBank.build = classmethod(lambda cls, *a, **k: _b(cls, *a, **{**k, **_over}))
 
 args = dict(a.split("=") for a in sys.argv[1:])
 import dataclasses
