@@ -24,8 +24,12 @@ Example:
 
 from __future__ import annotations
 
+import hashlib
+import math
 import os
+import warnings
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -48,6 +52,78 @@ Q_HEADS: dict[str, type[OptionQHead]] = {
     "MLPOptionQHead": MLPOptionQHead,
 }
 _METADATA = ("status", "target_event", "parent", "created_episode")
+_ZIP, _PICKLE = b"PK\x03\x04", b"\x80"  # how torch.save's files (zip, legacy pickle) start
+
+
+def read_torch_file(path: str | os.PathLike, what: str) -> Any:
+    """``torch.load(path, weights_only=True)`` on the CPU; every failure is a ``ValueError`` of
+    one line, ``"{path}: not a readable {what} ({reason})"``, that says what the file is
+    instead (missing, a directory, empty, not a torch file, truncated or damaged, or holding
+    Python objects a weights-only load refuses). Torch's own warnings are not shown."""
+    path = Path(path)
+    head: bytes | None = None
+    if not path.exists():
+        reason = "no such file"
+    elif path.is_dir():
+        reason = "it is a directory"
+    else:
+        try:
+            with open(path, "rb") as f:
+                head = f.read(4)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return torch.load(path, map_location="cpu", weights_only=True)
+        except Exception as error:  # torch raises many types for truncated or foreign files
+            reason = _unreadable(head, error)
+    raise ValueError(f"{path}: not a readable {what} ({reason})")
+
+
+def content_digest(value: Any) -> str:
+    """The sha256 (hex) of a saved structure: each tensor's dtype, shape and bytes (on the
+    CPU), each plain value's type and ``repr``, dicts and sequences in order. Equal for the
+    structure saved and the one ``torch.load`` gives back, so it detects altered files."""
+    digest = hashlib.sha256()
+    _feed(digest, value)
+    return digest.hexdigest()
+
+
+def _feed(digest, value: Any) -> None:
+    if isinstance(value, Tensor):
+        t = value.detach().cpu().contiguous()
+        digest.update(f"T{t.dtype}{tuple(t.shape)}|".encode())
+        if t.numel():
+            digest.update(t.reshape(-1).view(torch.uint8).numpy())
+    elif isinstance(value, dict):
+        digest.update(f"D{len(value)}|".encode())
+        for key, item in value.items():
+            _feed(digest, key)
+            _feed(digest, item)
+    elif isinstance(value, (list, tuple)):
+        digest.update(f"L{len(value)}|".encode())
+        for item in value:
+            _feed(digest, item)
+    else:  # None, bool, int, float, str
+        text = repr(value)
+        digest.update(f"{type(value).__name__}{len(text)}|{text}".encode())
+
+
+def _unreadable(head: bytes | None, error: Exception) -> str:
+    """Why ``torch.load`` failed, in one short line."""
+    first = " ".join(str(error).split(". ")[0].split())[:160] or type(error).__name__
+    if head is None:
+        return first
+    if not head:
+        return "the file is empty"
+    if not head.startswith((_ZIP, _PICKLE)):
+        return f"not a torch file: it starts with {head!r}"
+    text = str(error)
+    if "Unsupported global" in text:
+        name = text.split("Unsupported global:", 1)[1].split()[1:2]
+        return (f"it holds Python objects ({', '.join(name) or 'a global'}) that a weights-only "
+                f"load refuses")  # fmt: skip
+    if "Weights only load failed" in text:  # e.g. a plain pickle, not torch.save's format
+        return "not a torch file, or a damaged one: the unpickler refused it"
+    return f"a truncated or damaged torch file: {first}"
 
 
 class OptionBank(nn.Module):
@@ -73,6 +149,10 @@ class OptionBank(nn.Module):
         self.population, self.slots = population, slots
         self.q_head = q_head
         self.classifier = classifier
+        # The map the options were learned on (set by the trainer that learns them; saved with
+        # the bank so a run on another map refuses them); None: not known.
+        self.map: str | None = None
+        self.legacy = False  # loaded from a file saved before banks recorded their environment
         device = classifier.seeds.device
         self.register_buffer("status", torch.zeros(population, slots, dtype=torch.int64,
                                                    device=device))  # fmt: skip
@@ -105,6 +185,47 @@ class OptionBank(nn.Module):
         """
         member = self.classifier.contains(obs) if contains is None else contains
         return self.executable() & member
+
+    @property
+    def obs_dim(self) -> int:
+        """The observation size the initiation classifiers (and option heads) take."""
+        return int(self.classifier.examples.shape[-1])
+
+    @property
+    def num_actions(self) -> int:
+        """The primitive actions of the option Q-heads."""
+        return int(self.q_head.num_actions)
+
+    def environment(self) -> dict[str, Any]:
+        """What the options were learned on, as saved: ``map``, ``obs_dim``, ``num_actions``."""
+        return {"map": self.map, "obs_dim": self.obs_dim, "num_actions": self.num_actions}
+
+    def feature_settings(self) -> dict[str, Any]:
+        """The options' feature settings, as saved: the Q-head class and its basis (Fourier
+        ``order``, or the MLP's ``hidden``/``layers``), and the initiation classifiers'
+        polynomial ``degree`` and ``centered`` inputs."""
+        head = self.q_head.config
+        out: dict[str, Any] = {"q_head": type(self.q_head).__name__}
+        out.update({k: head[k] for k in ("order", "hidden", "layers") if k in head})
+        cls = self.classifier.config
+        out.update(initiation_degree=cls.get("degree"), initiation_centered=cls.get("centered"))
+        return out
+
+    def check_environment(self, source: str | os.PathLike, map: str | None = None,
+                          obs_dim: int | None = None,
+                          num_actions: int | None = None) -> None:  # fmt: skip
+        """``ValueError`` naming the field if the bank was learned on another map, or its
+        parts take another observation size or action count, than a run's (``None``: not
+        checked). A bank saved without its map (:attr:`legacy`) passes the map check."""
+        ours = self.environment()
+        for field, want, flag in (("map", map, "--map"), ("obs_dim", obs_dim, None),
+                                  ("num_actions", num_actions, None)):  # fmt: skip
+            have = ours[field]
+            if want is None or have is None or have == want:
+                continue
+            where = f" ({flag} {want})" if flag else ""
+            raise ValueError(f"{source}: the options were learned with {field} = {have!r}, but "
+                             f"this run has {field} = {want!r}{where}")  # fmt: skip
 
     def full(self) -> Tensor:
         """``[P]``: agents with no empty slot left."""
@@ -188,12 +309,17 @@ class OptionBank(nn.Module):
                          self.classifier.select_agents(index, seeds))  # fmt: skip
         for name in _METADATA:
             getattr(new, name).copy_(getattr(self, name)[index.to(self.status.device)])
+        new.map, new.legacy = self.map, self.legacy
         return new
 
     # ------------------------------------------------------------------------------- files
     def save(self, path: str | os.PathLike) -> None:
-        """Write the bank (format version, parts' configs, all state) with ``torch.save``."""
-        torch.save(self._payload(), path)
+        """Write the bank (format version, parts' configs, what the options were learned on
+        (:meth:`environment`), their :meth:`feature_settings`, all state, and a ``sha256``
+        digest of the rest that :meth:`load` verifies) with ``torch.save``."""
+        payload = self._payload()
+        payload["sha256"] = content_digest(payload)
+        torch.save(payload, path)
 
     def _payload(self) -> dict[str, Any]:
         return {
@@ -203,6 +329,8 @@ class OptionBank(nn.Module):
             "slots": self.slots,
             "q_head": {"class": type(self.q_head).__name__, "config": dict(self.q_head.config)},
             "classifier": {"config": dict(self.classifier.config)},
+            "environment": self.environment(),
+            "features": self.feature_settings(),
             "state": {k: v.detach().cpu() for k, v in self.state_dict().items()},
         }
 
@@ -211,17 +339,31 @@ class OptionBank(nn.Module):
              classifier: InitiationClassifier | None = None,
              device: torch.device | str | None = None) -> OptionBank:  # fmt: skip
         """Read a file written by :meth:`save`; the parts are rebuilt from the stored configs
-        unless given (then they must match the stored shapes). Raises ``ValueError`` for an
-        unreadable, foreign, other-version or mismatched file."""
-        try:
-            payload = torch.load(path, map_location="cpu", weights_only=True)
-        except Exception as error:  # corrupt or not a torch file
-            raise ValueError(f"{path}: not a readable OptionBank file ({error})") from error
+        unless given (then they must match the stored shapes). Raises ``ValueError`` (one line,
+        naming the file) for an unreadable, foreign, other-version or mismatched file, one
+        whose digest, recorded environment or feature settings disagree with its contents,
+        and one with NaN or infinite values (a diverged learner). Files saved before banks
+        recorded their environment load with :attr:`map` ``None`` and :attr:`legacy` set."""
+        payload = read_torch_file(path, "OptionBank file")
         if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-            raise ValueError(f"{path}: not an OptionBank file (format {FORMAT!r} expected)")
+            kind = ""
+            if isinstance(payload, dict) and {"format_version", "agent", "trainer"} <= set(payload):
+                kind = "; it is a training checkpoint (a skill-chaining run writes its options "
+                kind += "to DIR/options.pt)"
+            raise ValueError(f"{path}: not an OptionBank file (format {FORMAT!r} expected{kind})")
         if payload.get("version") != FORMAT_VERSION:
-            raise ValueError(f"{path}: OptionBank format version {payload.get('version')}, this "
-                             f"library reads version {FORMAT_VERSION}")  # fmt: skip
+            raise ValueError(f"{path}: OptionBank format version {payload.get('version')!r}, "
+                             f"this library reads version {FORMAT_VERSION}")  # fmt: skip
+        if "sha256" in payload:  # files saved before banks had one load unverified
+            try:
+                actual = content_digest({k: v for k, v in payload.items() if k != "sha256"})
+            except Exception as error:  # a value the digest cannot take: not what was saved
+                raise ValueError(f"{path}: OptionBank contents cannot be digested "
+                                 f"({error})") from None  # fmt: skip
+            if payload["sha256"] != actual:
+                raise ValueError(f"{path}: checksum mismatch (sha256 stored "
+                                 f"{str(payload['sha256'])[:16]}..., contents {actual[:16]}...): "
+                                 f"the file was altered or damaged after it was written")
         try:
             population, slots = int(payload["population"]), int(payload["slots"])
             if q_head is None:
@@ -231,10 +373,38 @@ class OptionBank(nn.Module):
                 classifier = InitiationClassifier(**payload["classifier"]["config"],
                                                   device=device)  # fmt: skip
             bank = cls(population, slots, q_head, classifier)
-            bank.load_state_dict(payload["state"])
-        except (KeyError, TypeError, RuntimeError, ValueError) as error:
-            raise ValueError(f"{path}: OptionBank file does not match ({error})") from error
+            state = payload["state"]
+            _check_finite(state, population)
+            bank.load_state_dict(state)
+        except _NonFinite as error:
+            raise ValueError(f"{path}: {error}; a diverged bank is not loaded") from None
+        except (KeyError, TypeError, RuntimeError, ValueError, AttributeError, IndexError,
+                OverflowError) as error:  # fmt: skip
+            reason = " ".join(str(error).split())[:300]
+            raise ValueError(f"{path}: OptionBank file does not match ({reason})") from None
+        bank._read_recorded(path, payload)
         return bank
+
+    def _read_recorded(self, path, payload: dict) -> None:
+        """Check the file's ``environment`` and ``features`` against the rebuilt parts."""
+        env, features = payload.get("environment"), payload.get("features")
+        if env is None and features is None:  # saved before banks recorded them
+            self.legacy = True
+            return
+        for name, recorded, actual in (("environment", env, self.environment()),
+                                       ("features", features, self.feature_settings())):
+            if not isinstance(recorded, dict):
+                raise ValueError(f"{path}: field {name!r} is not a dict")
+            for key, value in actual.items():
+                if key == "map":
+                    continue
+                if recorded.get(key) != value:
+                    raise ValueError(f"{path}: field '{name}.{key}' is {recorded.get(key)!r}, "
+                                     f"but the bank's parts have {value!r}")  # fmt: skip
+        saved_map = env.get("map")
+        if saved_map is not None and not isinstance(saved_map, str):
+            raise ValueError(f"{path}: field 'environment.map' is {saved_map!r}, not a name")
+        self.map = saved_map
 
     @classmethod
     def from_agent(cls, path: str | os.PathLike, agent: int, population: int,
@@ -246,3 +416,25 @@ class OptionBank(nn.Module):
 
     def extra_repr(self) -> str:
         return f"population={self.population}, slots={self.slots}"
+
+
+class _NonFinite(ValueError):
+    pass
+
+
+def _check_finite(state: dict, population: int) -> None:
+    """``_NonFinite`` naming the first floating tensor of ``state`` with NaN or inf values."""
+    for key, value in state.items():
+        if not (isinstance(value, Tensor) and value.is_floating_point()):
+            continue
+        if math.isfinite(float(value.sum())):  # one pass when all is well
+            continue
+        bad = ~torch.isfinite(value)
+        if not bool(bad.any()):  # a finite sum that overflowed
+            continue
+        where = ""
+        if value.dim() >= 1 and value.shape[0] == population:
+            agents = bad.reshape(population, -1).any(-1).nonzero().flatten().tolist()
+            where = f" (agents {agents})"
+        raise _NonFinite(f"tensor {key!r} holds {int(bad.sum())} NaN or infinite "
+                         f"values{where}")  # fmt: skip
