@@ -11,39 +11,82 @@ slot is made LEARNED (executable). The top level is SMDP Sarsa with the run's ``
 
 The file's path is read from ``config.options`` (the ``--options`` flag). Options from a
 skill-chaining run (``DIR/options.pt``) keep the no-overlap rule they were learned under.
+A bank learned on another map, or for another observation size or action count, is refused
+(``ValueError`` naming the field); banks saved before they recorded their map load with a
+warning that the map cannot be checked.
 """
 
 from __future__ import annotations
 
+import logging
+
 import torch
 
 from skillchain_torch.agents import HierarchicalAgent
+from skillchain_torch.agents.hierarchical import OBS_DIM
+from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.options import OptionBank, OptionStatus
 
 from .config import TrainConfig
 
 __all__ = ["GivenOptionsAgent", "load_given_options"]
 
+logger = logging.getLogger(__name__)
+
 
 def load_given_options(path, population: int, seed: int = 0,
                        device: torch.device | str | None = None,
-                       agent: int | None = 0) -> OptionBank:  # fmt: skip
+                       agent: int | None = 0, map: str | None = None) -> OptionBank:  # fmt: skip
     """Saved agent ``agent``'s options from ``path`` replicated ``population`` times (or, with
     ``agent=None``, saved agent ``p mod N`` for agent p), reseeded ``seed + p``.
 
     Options that were executable (LEARNING or LEARNED) become LEARNED; gestating ones, never
-    executed and with no initiation set yet, are dropped (their slots emptied)."""
+    executed and with no initiation set yet, are dropped (their slots emptied; a warning is
+    logged when that leaves an agent without options). ``map``: the run's map; a bank that
+    records another one is refused (``ValueError``), as is one for another observation size
+    or action count than Pinball's, or an ``agent`` the file does not hold."""
     seeds = torch.arange(population, dtype=torch.int64) + int(seed)
     saved = OptionBank.load(path, device=device)
+    saved.check_environment(path, map=map, obs_dim=OBS_DIM, num_actions=NUM_ACTIONS)
+    if saved.legacy and map is not None:
+        logger.warning("%s records no map (saved before option banks did): cannot check that "
+                       "its options were learned on %s", path, map)
     if agent is not None and not 0 <= agent < saved.population:
-        raise ValueError(f"{path} holds agents 0..{saved.population - 1}; options_agent "
-                         f"{agent} is not one of them")  # fmt: skip
+        raise ValueError(f"--options-agent {agent}: {path} holds {saved.population} agent"
+                         f"{'s' if saved.population != 1 else ''}, so expected 0.."
+                         f"{saved.population - 1} or 'each'")  # fmt: skip
+    if agent is None and population > saved.population:
+        logger.warning("%s holds %d agents and this run has %d: with --options-agent each, "
+                       "agent p takes saved agent p mod %d's options (agents share them)",
+                       path, saved.population, population, saved.population)
     index = [agent] * population if agent is not None else [
         p % saved.population for p in range(population)]
     bank = saved.select_agents(index, seeds)
     bank.free(bank.status == OptionStatus.GESTATING)
     bank.set_status(bank.live(), OptionStatus.LEARNED)
+    _warn_empty(path, saved, index)
     return bank
+
+
+def _warn_empty(path, saved: OptionBank, index: list[int]) -> None:
+    """Log the saved agents whose options are all dropped or absent, so that the agents
+    given them start with 0 options."""
+    executable = saved.executable().any(-1).tolist()
+    gestating = (saved.status == OptionStatus.GESTATING).sum(-1).tolist()
+    without = sorted({a for a in index if not executable[a]})
+    for kind, agents in (("gestating", [a for a in without if gestating[a]]),
+                         ("none", [a for a in without if not gestating[a]])):  # fmt: skip
+        if not agents:
+            continue
+        users = sum(index.count(a) for a in agents)
+        start = f"{users} of this run's {len(index)} agents start with 0 options"
+        if kind == "gestating":
+            n = sum(gestating[a] for a in agents)
+            logger.warning("%s: the options of saved agent(s) %s are all still gestating: %d "
+                           "option(s) dropped (never executed, no initiation set yet); %s",
+                           path, agents, n, start)
+        else:
+            logger.warning("%s: saved agent(s) %s hold no options; %s", path, agents, start)
 
 
 class GivenOptionsAgent(HierarchicalAgent):
@@ -62,7 +105,7 @@ class GivenOptionsAgent(HierarchicalAgent):
             raise ValueError("the given-options agent needs an options file (--options PATH)")
         device = torch.device(cfg.device if device is None else device)
         bank = load_given_options(path, cfg.runs, cfg.seed, device=device,
-                                  agent=cfg.options_agent)
+                                  agent=cfg.options_agent, map=cfg.map)
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device,
