@@ -8,6 +8,15 @@ counters. Everything is a tensor or a plain Python value, so it loads with
 ``torch.load(weights_only=True)``. A run resumed from a checkpoint continues bit for bit as if
 it had never stopped.
 
+Integrity: a checkpoint also holds ``sha256``, a digest of everything else it holds (the
+tensors' bytes, dtypes and shapes, and the plain values), which :func:`read_checkpoint`
+verifies; a file whose bytes were altered, or a truncated one, raises
+:class:`DamagedCheckpoint`. Checkpoints written before the digest (no ``sha256``) load
+unverified. :func:`save_checkpoint` writes a temporary file, reads it back and verifies it
+before it replaces anything, and every checkpoint is kept (``ckpt_{episodes}.pt``), so a
+failed write loses none. :func:`resume_checkpoint` loads the newest checkpoint that verifies,
+moving damaged newer ones aside (``NAME.damaged``) with a warning that names them.
+
 Example:
     >>> import tempfile
     >>> from skillchain_torch.trainers import PopulationTrainer, TrainConfig
@@ -22,18 +31,24 @@ Example:
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 from pathlib import Path
 
 import torch
 
+from skillchain_torch.options.bank import content_digest, read_torch_file
+
 from .config import TrainConfig
 
 __all__ = ["FORMAT_VERSION", "save_checkpoint", "read_checkpoint", "load_checkpoint",
-           "latest_checkpoint"]
+           "latest_checkpoint", "resume_checkpoint", "payload_digest", "DamagedCheckpoint"]
 
-FORMAT_VERSION = 1
+logger = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1  # the digest is an optional field: files with it still read as version 1
+CHECKSUM = "sha256"
 _NAME = re.compile(r"ckpt_(\d+)\.pt$")
 _SECTIONS = {
     "agent": ("q_head", "rng", "index", "action", "phi"),
@@ -43,29 +58,68 @@ _SECTIONS = {
 }
 
 
+class DamagedCheckpoint(ValueError):
+    """A checkpoint file that cannot be trusted: unreadable, truncated, not a checkpoint,
+    missing fields, or failing its digest (as opposed to one of another version or config)."""
+
+
+def payload_digest(state: dict) -> str:
+    """The sha256 (hex) of ``state`` without its ``sha256`` field (see
+    :func:`~skillchain_torch.options.bank.content_digest`)."""
+    return content_digest({k: v for k, v in state.items() if k != CHECKSUM})
+
+
 def save_checkpoint(trainer, path: str | Path) -> Path:
-    """Write ``trainer``'s state to ``path`` atomically (a temporary file, then a rename)."""
+    """Write ``trainer``'s state and its digest to ``path``: a temporary file, flushed to disk,
+    read back and verified, then renamed over ``path`` (an ``OSError`` before the rename
+    leaves every earlier checkpoint as it was)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = {"format_version": FORMAT_VERSION, **trainer.state_dict()}
+    payload[CHECKSUM] = payload_digest(payload)
     tmp = path.with_name(path.name + ".tmp")
-    torch.save(payload, tmp)
+    try:
+        with open(tmp, "wb") as f:
+            torch.save(payload, f)
+            f.flush()
+            os.fsync(f.fileno())
+        read_checkpoint(tmp)
+    except ValueError as err:
+        tmp.unlink(missing_ok=True)
+        raise OSError(f"{path}: the checkpoint written does not read back ({err}); the "
+                      f"earlier checkpoints are kept") from None  # fmt: skip
+    except BaseException:  # a full disk, an interrupt: no half-written file is left
+        tmp.unlink(missing_ok=True)
+        raise
     os.replace(tmp, path)
+    try:  # the rename itself, on disk
+        fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except OSError:  # not every file system lets a directory be synced
+        pass
     return path
 
 
 def read_checkpoint(path: str | Path) -> dict:
-    """Load and check the structure of a checkpoint; ``ValueError`` naming the file and field."""
+    """Load and check a checkpoint: its format version, structure and (when it has one) its
+    digest. ``DamagedCheckpoint`` for a file that cannot be trusted, ``ValueError`` for one of
+    another version or with an invalid config; both one line naming the file and field."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such checkpoint file")
     try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as err:  # torch raises many types for truncated or foreign files
-        raise ValueError(f"{path}: not a readable checkpoint ({type(err).__name__}: {err})") \
-            from None
+        state = read_torch_file(path, "checkpoint")
+    except ValueError as err:
+        raise DamagedCheckpoint(str(err)) from None
     if not isinstance(state, dict) or "format_version" not in state:
-        raise ValueError(f"{path}: not a skillchain checkpoint (field 'format_version' missing)")
+        kind = ""
+        if isinstance(state, dict) and state.get("format") == "skillchain_torch.OptionBank":
+            kind = "; it is an OptionBank file (for --agent given-options --options)"
+        raise DamagedCheckpoint(f"{path}: not a skillchain checkpoint (field 'format_version' "
+                                f"missing{kind})")  # fmt: skip
     version = state["format_version"]
     if version != FORMAT_VERSION:
         raise ValueError(
@@ -74,11 +128,21 @@ def read_checkpoint(path: str | Path) -> dict:
         )
     for field in ("config", *_SECTIONS, "modules"):
         if not isinstance(state.get(field), dict):
-            raise ValueError(f"{path}: field {field!r} is missing or not a dict")
+            raise DamagedCheckpoint(f"{path}: field {field!r} is missing or not a dict")
     for section, keys in _SECTIONS.items():
         for key in keys:
             if key not in state[section]:
-                raise ValueError(f"{path}: field '{section}.{key}' is missing")
+                raise DamagedCheckpoint(f"{path}: field '{section}.{key}' is missing")
+    if CHECKSUM in state:
+        stored = state[CHECKSUM]
+        try:
+            actual = payload_digest(state)
+        except Exception as err:  # a value the digest cannot take: not what was saved
+            raise DamagedCheckpoint(f"{path}: its contents cannot be digested ({err})") from None
+        if stored != actual:
+            raise DamagedCheckpoint(
+                f"{path}: checksum mismatch (sha256 stored {str(stored)[:16]}..., contents "
+                f"{actual[:16]}...): the file was altered or damaged after it was written")
     try:
         state["config"] = TrainConfig.from_dict(state["config"])
     except (TypeError, ValueError) as err:
@@ -92,7 +156,10 @@ def load_checkpoint(path: str | Path, trainer) -> None:
     Only ``checkpoint_every`` and ``device`` may differ. A mismatch (e.g. another map, number
     of runs or seed) raises ``ValueError`` naming the file and the field.
     """
-    state = read_checkpoint(path)
+    _restore(read_checkpoint(path), path, trainer)
+
+
+def _restore(state: dict, path: Path, trainer) -> None:
     saved: TrainConfig = state["config"]
     for field in saved.mismatches(trainer.config):
         raise ValueError(
@@ -102,18 +169,56 @@ def load_checkpoint(path: str | Path, trainer) -> None:
     state["config"] = saved.to_dict()
     try:
         trainer.load_state_dict(state)
-    except (KeyError, RuntimeError, IndexError) as err:
+    except (KeyError, RuntimeError, IndexError, TypeError, AttributeError) as err:
         raise ValueError(f"{path}: inconsistent checkpoint contents ({err})") from None
     except ValueError as err:  # e.g. saved by the other flat-agent kernel
         raise ValueError(f"{path}: {err}") from None
 
 
-def latest_checkpoint(directory: str | Path) -> Path | None:
-    """The checkpoint with the most completed episodes under ``directory`` (or its
-    ``checkpoints/`` folder); ``None`` if there is none."""
+def resume_checkpoint(directory: str | Path, trainer) -> Path:
+    """Restore ``trainer`` from the newest checkpoint under ``directory`` that verifies;
+    returns its path.
+
+    Newer checkpoints that are damaged (:class:`DamagedCheckpoint`) are renamed
+    ``NAME.damaged`` once an older one has loaded (so the resumed run does not write over
+    them), each with a logged warning naming it and the checkpoint used instead. Raises
+    ``ValueError`` if there is no checkpoint or none verifies (naming the newest), or if the
+    newest readable one does not fit ``trainer`` (another config or version: not damage,
+    so no older one is tried).
+    """
+    found = _checkpoints(directory)
+    if not found:
+        raise ValueError(f"{directory}: no checkpoint under {Path(directory) / 'checkpoints'}")
+    damaged: list[tuple[Path, DamagedCheckpoint]] = []
+    for path in reversed(found):
+        try:
+            state = read_checkpoint(path)
+        except DamagedCheckpoint as err:
+            damaged.append((path, err))
+            continue
+        _restore(state, path, trainer)
+        for bad, err in damaged:
+            aside = bad.with_name(bad.name + ".damaged")
+            os.replace(bad, aside)
+            logger.warning("%s; moved aside to %s, resuming from the previous good checkpoint "
+                           "%s", err, aside.name, path.name)
+        return path
+    more = "; no earlier checkpoint verifies either" if len(damaged) > 1 else ""
+    raise ValueError(f"{damaged[0][1]}{more}")
+
+
+def _checkpoints(directory: str | Path) -> list[Path]:
+    """The checkpoints under ``directory`` (or its ``checkpoints/`` folder), oldest first."""
     directory = Path(directory)
     if (directory / "checkpoints").is_dir():
         directory = directory / "checkpoints"
     found = [(int(m.group(1)), p) for p in directory.glob("ckpt_*.pt")
              if (m := _NAME.search(p.name))]
-    return max(found)[1] if found else None
+    return [p for _, p in sorted(found)]
+
+
+def latest_checkpoint(directory: str | Path) -> Path | None:
+    """The checkpoint with the most completed episodes under ``directory`` (or its
+    ``checkpoints/`` folder); ``None`` if there is none."""
+    found = _checkpoints(directory)
+    return found[-1] if found else None
