@@ -22,10 +22,20 @@ step in which episodes ended (an :class:`EpisodeBatch`); ``"post_checkpoint"``
 Checkpoints: whenever the slowest agent completes a multiple of ``checkpoint_every`` episodes
 (``min`` over agents of episodes completed), and at the end, to
 ``out_dir/checkpoints/ckpt_{episodes:06d}.pt``.
+
+Divergence: at each episode end the learners of the agents whose episodes ended (the top-level
+Q-head, and for agents with options the option Q-heads and the initiation classifiers) are
+checked for NaN or infinite weights, and every learner of every agent before each checkpoint
+is written. A diverged run stops with :class:`Diverged` (a ``FloatingPointError`` naming the
+agents, the learner and the parameter to change); it writes no checkpoint of the diverged
+weights, so the last one written is good, and saves the returns so far as
+``out_dir/partial_returns.npy`` and ``partial_lengths.npy`` with ``out_dir/diverged.json``.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,9 +49,22 @@ from .agents import make_agent
 from .config import TrainConfig
 from .stepper import SCALAR_MAX, ActiveEnvStepper
 
-__all__ = ["PopulationTrainer", "EpisodeBatch", "STAGES"]
+__all__ = ["PopulationTrainer", "EpisodeBatch", "STAGES", "Diverged", "DIVERGED_OUTPUTS"]
 
 STAGES = ("pre_train", "post_episodes", "post_checkpoint", "post_train")
+DIVERGED_OUTPUTS = ("diverged.json", "partial_returns.npy", "partial_lengths.npy")
+
+
+class Diverged(FloatingPointError):
+    """A learner's weights became NaN or infinite, so the run stopped.
+
+    ``agents``: the diverged agents' ids; ``learners``: ``{learner: [agent ids]}``. The
+    message (one line) names them and the run parameter to change.
+    """
+
+    def __init__(self, message: str, agents: list[int], learners: dict[str, list[int]]):
+        super().__init__(message)
+        self.agents, self.learners = agents, learners
 
 
 @dataclass(frozen=True)
@@ -98,6 +121,10 @@ class PopulationTrainer:
                               seed=config.seed)
         self.stepper = ActiveEnvStepper(self.env, scalar_max=scalar_max, native=native)
         self.agent = make_agent(config, device=self.device, native=native)
+        bank = getattr(self.agent, "bank", None)
+        if bank is not None and bank.map is None and not bank.legacy:
+            bank.map = config.map  # saved with the options (a run on another map refuses them)
+        self.diverged: Diverged | None = None
         P, E = config.runs, config.episodes
         self.returns = np.full((P, E), np.nan)
         self.lengths = np.zeros((P, E), dtype=np.int64)
@@ -151,24 +178,29 @@ class PopulationTrainer:
     def train(self, max_agent_steps: int | None = None) -> PopulationTrainer:
         """Run until every agent has finished its episodes (or ``agent_steps`` reaches
         ``max_agent_steps``; calling ``train`` again continues)."""
+        if self.diverged is not None:
+            raise self.diverged
         self._clock = time.perf_counter()
         self._training = True
         threads = torch.get_num_threads()
         if self.num_threads is not None:
             torch.set_num_threads(self.num_threads)
         try:
-            if not self.started:
-                self.agent.begin(self.stepper.start())
-                self.started = True
-            self._call("pre_train")
-            self._loop(max_agent_steps)
-        finally:
-            self._tick()
-            self._training = False
-            torch.set_num_threads(threads)
-        if self.finished and not self._finalized:
-            self._finalized = True
-            self._finish()
+            try:
+                if not self.started:
+                    self.agent.begin(self.stepper.start())
+                    self.started = True
+                self._call("pre_train")
+                self._loop(max_agent_steps)
+            finally:
+                self._tick()
+                self._training = False
+                torch.set_num_threads(threads)
+            if self.finished and not self._finalized:
+                self._finalized = True
+                self._finish()
+        except FloatingPointError as error:  # ours, or the flat agent's own check
+            raise self._diverge(error) from None
         return self
 
     def _tick(self) -> None:
@@ -210,6 +242,7 @@ class PopulationTrainer:
         restart = rows[~finishing]
         start_obs = self.stepper.reset(restart) if restart.numel() else None
         self.agent.observe_ends(obs, reward, terminated, truncated, restart, start_obs)
+        self.check_learners(rows)
         self._ret[rows] = 0.0
         self._start[rows] = self.global_step
         if bool(finishing.any()):
@@ -234,6 +267,111 @@ class PopulationTrainer:
         if self.out_dir is not None:
             self.save_checkpoint()
         self._call("post_train")
+
+    # ------------------------------------------------------------------ divergence
+    def _learners(self, rows: torch.Tensor | None) -> list[tuple[str, str, list[torch.Tensor]]]:
+        """``(learner, advice, tensors)`` with agents on dim 0: the learners of the agents at
+        active rows ``rows`` (``None``: all P agents, after a flush)."""
+        agent, cfg = self.agent, self.config
+        if rows is None:
+            agent.flush()
+            ids = None
+        elif rows.numel() == 1:  # the usual case: views, no copies
+            ids = int(agent.index[rows])
+        else:
+            ids = agent.index[rows]
+
+        def pick(t: torch.Tensor) -> torch.Tensor:
+            if ids is None:
+                return t
+            if isinstance(ids, int):
+                return t[ids:ids + 1]
+            return t.index_select(0, ids.to(t.device))
+
+        work = getattr(agent, "_work", None)  # the flat agent's working rows [D, n, F]
+        if rows is not None and work is not None:
+            top = work.w.index_select(1, rows).transpose(0, 1)
+        else:
+            top = pick(agent.q_head.weight)
+        learners = [("the top-level Q-head", f"lower --alpha (now {cfg.alpha:g})", [top])]
+        bank = getattr(agent, "bank", None)
+        if bank is None:
+            return learners
+        heads = [pick(t) for t in bank.q_head.slot_tensors().values()]  # [P, K, ...]
+        alpha = bank.q_head.config.get("alpha")
+        if cfg.agent == "given-options":
+            advice = (f"their step size (alpha {alpha:g}) is the one saved in --options "
+                      f"{cfg.options}" if alpha is not None else "")
+        else:
+            advice = f"lower --option-alpha (now {cfg.option_alpha:g})"
+        classifier = bank.classifier
+        learners += [
+            ("the option Q-heads", advice, heads),
+            ("the initiation classifiers",
+             f"their step size (lr {classifier.lr:g}) is not a run parameter",
+             [pick(classifier.weight), pick(classifier.bias)]),
+        ]
+        return learners
+
+    def check_learners(self, rows: torch.Tensor | None = None) -> None:
+        """Raise :class:`Diverged` if a learner of the agents at active rows ``rows`` (default:
+        every agent) holds a NaN or infinite weight. One reduction per tensor and one sync
+        when all is well."""
+        learners = self._learners(rows)
+        # A sum is non-finite if any term is (an overflowing sum of finite weights is looked
+        # at below and passes).
+        sums = [t.sum() for _, _, tensors in learners for t in tensors]
+        if math.isfinite(torch.stack(sums).sum()):
+            return
+        ids = (torch.arange(self.config.runs) if rows is None else self.agent.index[rows]).tolist()
+        found: dict[str, list[int]] = {}
+        parts = []
+        for learner, advice, tensors in learners:
+            bad = torch.zeros(len(ids), dtype=torch.bool)
+            for t in tensors:
+                bad |= ~torch.isfinite(t.reshape(len(ids), -1)).all(-1).cpu()
+            if bool(bad.any()):
+                found[learner] = [ids[i] for i in bad.nonzero().flatten().tolist()]
+                parts.append(f"{learner} of agents {_short(found[learner])}"
+                             + (f": {advice}" if advice else ""))
+        if not found:
+            return
+        agents = sorted({a for group in found.values() for a in group})
+        done = sorted({int(self.episodes_done[a]) for a in agents})
+        done_text = str(done[0]) if len(done) == 1 else f"{done[0]}-{done[-1]}"
+        last = None
+        if self.out_dir is not None:
+            from .checkpoint import latest_checkpoint
+
+            last = latest_checkpoint(self.out_dir)
+        saved = (f"returns so far in {self.out_dir / 'partial_returns.npy'}; last good "
+                 f"checkpoint {last if last is not None else 'none (none was written yet)'}"
+                 if self.out_dir is not None else "no out_dir, nothing saved")
+        raise Diverged(
+            f"agents {_short(agents)} have non-finite weights (NaN or infinite) after "
+            f"{done_text} completed episodes: " + "; ".join(parts)
+            + f". The run diverged and stopped: {saved}", agents, found)
+
+    def _diverge(self, error: FloatingPointError) -> FloatingPointError:
+        """The :class:`Diverged` for ``error`` (the flat agent's own check names no learner:
+        every learner is checked), after saving the returns so far; ``error`` itself if no
+        learner is non-finite."""
+        if not isinstance(error, Diverged):
+            try:
+                self.check_learners()
+                return error
+            except Diverged as found:
+                error = found
+        self.diverged = error
+        if self.out_dir is not None:
+            out = self.out_dir
+            out.mkdir(parents=True, exist_ok=True)
+            np.save(out / "partial_returns.npy", self.returns)
+            np.save(out / "partial_lengths.npy", self.lengths)
+            info = {"error": str(error), "agents": error.agents, "learners": error.learners,
+                    "episodes_done": self.episodes_done.tolist(), "config": self.config.to_dict()}
+            (out / "diverged.json").write_text(json.dumps(info, indent=1) + "\n")
+        return error
 
     # ------------------------------------------------------------------ outputs
     @property
@@ -262,6 +400,7 @@ class PopulationTrainer:
         from .checkpoint import save_checkpoint
 
         path = self.checkpoint_path() if path is None else Path(path)
+        self.check_learners()  # never a checkpoint of diverged weights
         save_checkpoint(self, path)
         self._call("post_checkpoint", path)
         return path
@@ -328,3 +467,10 @@ class PopulationTrainer:
         c = self.config
         return (f"PopulationTrainer(agent={c.agent!r}, map={c.map!r}, runs={c.runs}, "
                 f"episodes={c.episodes}, seed={c.seed}, active={self.num_active})")
+
+
+def _short(values: list[int], most: int = 10) -> str:
+    """``[0, 1, 2]``, or the first ``most`` and how many in all."""
+    if len(values) <= most:
+        return str(values)
+    return f"[{', '.join(map(str, values[:most]))}, ... ({len(values)} in all)]"
