@@ -8,7 +8,13 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from skillchain_torch.envs.pinball.maps import MAP_NAMES, PinballMap, load_map
+from skillchain_torch.envs.pinball.maps import (
+    MAP_NAMES,
+    RADIUS_MAX,
+    RADIUS_MIN,
+    PinballMap,
+    load_map,
+)
 
 SETTINGS = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 GOOD = "ball 0.02\ntarget 0.9 0.2 0.04\nstart 0.2 0.9\npolygon 0.1 0.1 0.3 0.1 0.2 0.3\n"
@@ -116,16 +122,27 @@ def test_to_casts_and_keeps_values():
         m.to(dtype=torch.int32)
 
 
+def test_every_original_map_loads(vectors_dir):
+    """Every map of the original domain (shared/pinball/configs) loads from its own file, and
+    the package ships each one unchanged, so the geometry checks accept all of them."""
+    originals = sorted((vectors_dir.parent / "configs").glob("*.cfg"))
+    assert [p.stem for p in originals] == list(MAP_NAMES)
+    for path in originals:
+        m = PinballMap.from_file(path)
+        assert m.n_polygons >= 4 and m.starts.shape[0] >= 1, path
+        assert Path(load_map(path.stem).source).read_bytes() == path.read_bytes()
+
+
 # ---------------------------------------------------------------- format details
 
 
 def test_whitespace_crlf_bom_and_ignored_lines():
     text = (
         "\ufeffball\t0.02  \r\n\r\n# comment 1 2\r\ndrag 0.9\r\ntarget 0.9   0.2 0.04\r\n"
-        "start 0.2 0.9 \r\nstart 0.1 0.1\r\npolygon 0.1 0.1 0.3 0.1 0.2 0.3"
+        "start 0.2 0.9 \r\nstart 0.1 0.5\r\npolygon 0.1 0.1 0.3 0.1 0.2 0.3"
     )
     m = PinballMap.from_string(text)
-    assert m.starts.tolist() == [[0.2, 0.9], [0.1, 0.1]]  # start lines are concatenated
+    assert m.starts.tolist() == [[0.2, 0.9], [0.1, 0.5]]  # start lines are concatenated
     assert m.n_polygons == 1 and m.ball_radius == 0.02
 
 
@@ -231,7 +248,8 @@ def parses_or_value_error(text):
         assert str(err).startswith("fuzz.cfg")
         return None
     # Whatever loads must satisfy the documented invariants.
-    assert m.ball_radius > 0 and m.target_radius > 0 and m.starts.shape[0] >= 1
+    assert RADIUS_MIN <= m.ball_radius < RADIUS_MAX and RADIUS_MIN <= m.target_radius < RADIUS_MAX
+    assert m.starts.shape[0] >= 1
     assert m.n_edges == sum(len(p) for p in m.polygons)
     for t in (m.starts, m.edge_start, m.edge_end, m.bbox):
         assert bool(((t >= 0) & (t <= 1)).all())
@@ -298,36 +316,38 @@ def test_fuzz_mutated_real_files(name, data):
     parses_or_value_error("\n".join(" ".join(t) for t in lines))
 
 
-COORD = st.floats(0.0, 1.0)
-RADIUS = st.floats(1e-9, 0.5)
+# Valid by construction (the geometry checks must accept every such map): starts in the
+# strip x <= 0.1, polygons at x >= 0.2 and the target at x >= 0.5, so with a ball radius at
+# most 0.05 and a target radius under 0.35 no start touches an obstacle or the goal.
+BALL = st.floats(RADIUS_MIN, 0.05)
+TARGET_R = st.floats(RADIUS_MIN, 0.35)
+START = st.tuples(st.floats(0.0, 0.1), st.floats(0.0, 1.0))
 
 
 @st.composite
 def star_polygon(draw):
-    """Random star-shaped polygon: distinct angles around a centre, all inside [0, 1]."""
-    cx, cy = draw(st.floats(0.1, 0.9)), draw(st.floats(0.1, 0.9))
+    """A random star-shaped polygon around a centre: one vertex per sector of 2 pi / n, each
+    angle jittered by at most 15% of a sector, so neighbouring angles differ by at least 0.48
+    and by less than pi: simple, of clearly non-zero area, inside [0.2, 1] x [0.01, 0.99]."""
+    cx, cy = draw(st.floats(0.3, 0.9)), draw(st.floats(0.11, 0.89))
     n = draw(st.integers(3, 9))
-    angles = sorted(
-        draw(
-            st.lists(
-                st.floats(0, 2 * math.pi, exclude_max=True), min_size=n, max_size=n, unique=True
-            )
-        )
-    )
+    phase = draw(st.floats(0.0, 2 * math.pi))
+    jitter = draw(st.lists(st.floats(-0.15, 0.15), min_size=n, max_size=n))
     radii = draw(st.lists(st.floats(0.001, 0.1), min_size=n, max_size=n))
-    pts = [(cx + r * math.cos(a), cy + r * math.sin(a)) for a, r in zip(angles, radii, strict=True)]
-    # Nearby angles can still round to the same point; such polygons are invalid by design.
-    pts = [p for k, p in enumerate(pts) if p != pts[k - 1]]
-    return pts if len(pts) >= 3 and pts[0] != pts[-1] else [(0.1, 0.1), (0.2, 0.1), (0.1, 0.2)]
+    return [
+        (cx + r * math.cos(phase + 2 * math.pi * (k + u) / n),
+         cy + r * math.sin(phase + 2 * math.pi * (k + u) / n))
+        for k, (u, r) in enumerate(zip(jitter, radii, strict=True))
+    ]  # fmt: skip
 
 
 @SETTINGS
 @given(
-    RADIUS,
-    COORD,
-    COORD,
-    RADIUS,
-    st.lists(st.tuples(COORD, COORD), min_size=1, max_size=3),
+    BALL,
+    st.floats(0.5, 1.0),
+    st.floats(0.0, 1.0),
+    TARGET_R,
+    st.lists(START, min_size=1, max_size=3),
     st.lists(star_polygon(), max_size=6),
     st.sampled_from([" ", "  ", "\t"]),
     st.sampled_from(["\n", "\r\n", " \n", "\n\n"]),
