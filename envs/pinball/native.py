@@ -61,20 +61,20 @@ class NativeBoard:
             )
         sb = scalar_board(pinball_map)
         f64 = torch.float64
-        self.edges = torch.tensor([list(e) for e in sb.edges], dtype=f64).reshape(-1, 6)
-        sizes = [len(c) for c in sb.cell_edges]
-        if max(sizes, default=0) > _MAX_CANDIDATES:
-            raise ValueError(
-                f"a grid cell of this map has {max(sizes)} candidate edges; the compiled step "
-                f"holds at most {_MAX_CANDIDATES}"
-            )
-        start = [0]
-        for s in sizes:
-            start.append(start[-1] + s)
-        self.cell_start = torch.tensor(start, dtype=torch.long)
-        self.cell_ids = torch.tensor([i for c in sb.cell_edges for i in c] or [0], dtype=torch.long)
-        self.clearance = torch.tensor(sb.clearance, dtype=f64)
         grid = sb.grid
+        most = _most_candidates(grid)
+        if most > _MAX_CANDIDATES:
+            raise ValueError(
+                f"a grid cell of map {pinball_map.name!r} has {most} candidate edges; the "
+                f"compiled step holds at most {_MAX_CANDIDATES} (pinball_step uses its Python "
+                "paths for such maps)"
+            )
+        self.edges = torch.tensor([list(e) for e in sb.edges], dtype=f64).reshape(-1, 6)
+        # The grid's own lists (CSR, int64), shared rather than copied: on large maps they are
+        # the biggest structure. cell_ids ends with a -1 that no cell's range reaches.
+        self.cell_start = grid.cell_start.to("cpu").contiguous()
+        self.cell_ids = grid.cell_ids.to("cpu").contiguous()
+        self.clearance = grid.clearance.to("cpu", f64).contiguous()
         self.params = torch.tensor(
             [
                 sb.r,
@@ -84,7 +84,7 @@ class NativeBoard:
                 grid.cell_size,
                 float(grid.resolution),
                 float(self.edges.shape[0]),
-                float(len(sizes)),
+                float(self.clearance.shape[0]),
             ],
             dtype=f64,
         )
@@ -165,12 +165,44 @@ def _check_layout(n, state, action, reward, terminated, obs, events) -> None:
                 f"{'' if t.is_contiguous() else ' (not contiguous)'}")
 
 
+def _most_candidates(grid) -> int:
+    counts = grid.cell_start[1:] - grid.cell_start[:-1]
+    return int(counts.max().item()) if counts.numel() else 0
+
+
 _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_UNSUPPORTED = object()
 
 
 def native_board(pinball_map: PinballMap) -> NativeBoard:
-    """The :class:`NativeBoard` of ``pinball_map``, built once and cached."""
+    """The :class:`NativeBoard` of ``pinball_map``, built once and cached.
+
+    ``ValueError`` for a map with more than 256 candidate edges in a grid cell (see
+    :func:`board_if_supported`).
+    """
+    board = board_if_supported(pinball_map)
+    if board is None:
+        NativeBoard(pinball_map)  # raises, naming the map and the count
+    return board
+
+
+def board_if_supported(pinball_map: PinballMap) -> NativeBoard | None:
+    """The cached :class:`NativeBoard` of ``pinball_map``, or ``None`` if the compiled step
+    cannot hold the map (a grid cell with more than 256 candidate edges: dense maps of
+    thousands of edges), which then has to take the Python paths, or is not built.
+
+    Example:
+        >>> from skillchain_torch.envs.pinball import load_map
+        >>> board_if_supported(load_map("pinball_box")) is not None or not AVAILABLE
+        True
+    """
+    if not AVAILABLE:
+        return None
     board = _CACHE.get(pinball_map)
     if board is None:
-        board = _CACHE[pinball_map] = NativeBoard(pinball_map)
-    return board
+        if _most_candidates(scalar_board(pinball_map).grid) > _MAX_CANDIDATES:
+            board = _UNSUPPORTED
+        else:
+            board = NativeBoard(pinball_map)
+        _CACHE[pinball_map] = board
+    return None if board is _UNSUPPORTED else board

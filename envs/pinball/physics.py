@@ -189,7 +189,11 @@ _INT_DTYPES = (torch.int64, torch.int32, torch.int16, torch.int8, torch.uint8)
 def _step(state, action, pinball_map, with_events: bool, scalar_max_batch: int | None = None):
     on_cpu64 = state.device.type == "cpu" and state.dtype == torch.float64
     if NATIVE and on_cpu64 and scalar_max_batch is None:
-        return _step_native(state, action, pinball_map)
+        # None for maps with more candidate edges per cell than the C step holds: those take
+        # the Python paths below (the same bits, slower).
+        board = native.board_if_supported(pinball_map)
+        if board is not None:
+            return _step_native(state, action, pinball_map, board)
     limit = SCALAR_MAX_BATCH if scalar_max_batch is None else scalar_max_batch
     if state.shape[0] <= limit and on_cpu64:
         _check_structure(state, action, pinball_map)
@@ -225,7 +229,7 @@ def _step(state, action, pinball_map, with_events: bool, scalar_max_batch: int |
     return next_state, reward, terminated, events
 
 
-def _step_native(state, action, pinball_map):
+def _step_native(state, action, pinball_map, board=None):
     """CPU float64 batches of any size through the compiled step (bit-identical, native.py)."""
     _check_structure(state, action, pinball_map)
     n = state.shape[0]
@@ -233,7 +237,8 @@ def _step_native(state, action, pinball_map):
     reward = torch.empty(n, dtype=torch.float64)
     terminated = torch.empty(n, dtype=torch.bool)
     events = torch.empty(n, 4, dtype=torch.long)
-    board = native.native_board(pinball_map)
+    if board is None:
+        board = native.native_board(pinball_map)
     action = action.to("cpu", torch.long).contiguous()  # C reads it as int64 host memory
     board.step_into(next_state, action, reward, terminated, None, events, check=False)
     return next_state, reward, terminated, events
@@ -280,7 +285,7 @@ def _resolve_near(p, v, pinball_map: PinballMap, grid, with_events: bool):
     big_r2 = pinball_map.target_radius * pinball_map.target_radius
     # Candidate edges of the start cell, fixed for the step (the grid's reach covers it).
     # Padding (-1) picks the table's last row, an edge far away that never touches.
-    cand = grid.cell_edges[grid.cell_index(p)]  # [m, K]
+    cand = grid.candidates(grid.cell_index(p))  # [m, K]
     geometry = grid.edge_geometry.to(p.dtype)[cand]  # [m, K, 5]: ax, ay, ex, ey, |e|^2
     polygon = grid.edge_polygon[cand]  # [m, K]
 

@@ -37,7 +37,7 @@ class ScalarBoard:
     target_r2: float
     edges: tuple  # per edge: (ax, ay, ex, ey, ee, polygon)
     clearance: list
-    cell_edges: list  # per cell: tuple of edge ids
+    cell_edges: _CellEdges  # cell_edges[cell]: tuple of edge ids, read from the grid on demand
     grid: CollisionGrid
 
     @classmethod
@@ -50,7 +50,6 @@ class ScalarBoard:
         for (ax, ay), (bx, by), k in zip(a, b, poly):
             ex, ey = bx - ax, by - ay
             edges.append((ax, ay, ex, ey, ex * ex + ey * ey, k))
-        cells = [tuple(i for i in row if i >= 0) for row in grid.cell_edges.cpu().tolist()]
         tr = pinball_map.target_radius
         return cls(
             pinball_map.ball_radius,
@@ -58,7 +57,7 @@ class ScalarBoard:
             tr * tr,
             tuple(edges),
             grid.clearance.double().cpu().tolist(),
-            cells,
+            _CellEdges(grid),
             grid,
         )
 
@@ -67,6 +66,22 @@ class ScalarBoard:
         i = min(max(math.floor(x / h) + 1, 0), g - 1)
         j = min(max(math.floor(y / h) + 1, 0), g - 1)
         return j * g + i
+
+
+class _CellEdges(dict):
+    """``cell -> tuple of candidate edge ids``, filled from the grid as cells are visited.
+
+    Why lazy: a list of every cell's tuple costs ~36 bytes per (cell, edge) entry in Python
+    ints, far more than the grid itself on large maps, and a ball visits few cells.
+    """
+
+    def __init__(self, grid: CollisionGrid):
+        super().__init__()
+        self._grid = grid
+
+    def __missing__(self, cell: int) -> tuple:
+        ids = self[cell] = tuple(self._grid.cell_edge_list(cell))
+        return ids
 
 
 _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
