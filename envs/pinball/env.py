@@ -26,6 +26,7 @@ from torchrl.envs import EnvBase
 
 from skillchain_torch.rng import CounterRNG
 
+from .grid import check_grid_size
 from .maps import PinballMap, load_map
 from .physics import NUM_ACTIONS, observation, pinball_step
 from .render import render_frame
@@ -47,7 +48,10 @@ class PinballEnv(EnvBase):
     Args:
         map: a shipped map name (see ``MAP_NAMES``), a path to a ``.cfg`` file, or a
             :class:`~.maps.PinballMap`.
-        batch_size: ``()`` for one environment, ``[P]`` for P independent ones.
+        batch_size: ``()`` for one environment, ``[P]`` for P independent ones (any shape
+            whose dimensions are all >= 1). An empty batch (``[0]``) is refused with a
+            ``ValueError``: it has no environment to simulate, and TorchRL's rollouts and
+            collectors assume at least one.
         device: where states live (CUDA works; the physics is the same code).
         dtype: float64 by default: collisions are decided in this precision, and float32
             drifts from the original.
@@ -55,6 +59,11 @@ class PinballEnv(EnvBase):
             the original).
         seed: seed of environment 0; environment ``i`` uses ``seed + i``. ``None`` draws one
             from torch's global generator.
+
+    Every environment must be placed before it is stepped, by ``reset()`` (or
+    :meth:`reset_raw`, :meth:`set_state`): stepping one that never was raises
+    ``RuntimeError`` instead of moving a ball from (0, 0). TorchRL's ``rollout``,
+    ``check_env_specs`` and collectors reset first.
 
     Example:
         >>> env = PinballEnv("pinball_simple_single", batch_size=[2], seed=0)
@@ -83,7 +92,13 @@ class PinballEnv(EnvBase):
         if max_episode_steps is not None and int(max_episode_steps) < 1:
             raise ValueError(f"max_episode_steps must be >= 1 or None, got {max_episode_steps}")
         device = torch.device("cpu") if device is None else torch.device(device)
-        super().__init__(device=device, batch_size=torch.Size(batch_size))
+        batch_size = torch.Size(batch_size)
+        if any(d < 1 for d in batch_size):
+            raise ValueError(
+                f"batch_size must have every dimension >= 1, got {list(batch_size)} "
+                "(an empty batch has no environment to simulate)"
+            )
+        super().__init__(device=device, batch_size=batch_size)
         if isinstance(map, PinballMap):
             pinball_map = map
         elif str(map).endswith(".cfg") and ("/" in str(map) or "\\" in str(map)):
@@ -91,6 +106,8 @@ class PinballEnv(EnvBase):
         else:
             pinball_map = load_map(str(map))
         self.pinball_map = pinball_map.to(device=device, dtype=dtype)
+        # Refuse, before anything large is allocated, a map whose collision grid would not fit.
+        check_grid_size(self.pinball_map)
         self.dtype = dtype
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
         self.num_envs = math.prod(self.batch_size)
@@ -101,6 +118,10 @@ class PinballEnv(EnvBase):
             state=torch.zeros(n, 4, dtype=dtype, device=device),
             step_count=torch.zeros(n, dtype=torch.long, device=device),
             done=torch.ones(n, dtype=torch.bool, device=device),
+            # Until every environment has been reset (or set_state), step_raw refuses to run;
+            # `placed` marks those that have, and `ready` spares the hot path the tensor test.
+            placed=torch.zeros(n, dtype=torch.bool, device=device),
+            ready=False,
         )
         self._flat = self.batch_size == (n,)  # no reshapes needed at the boundary
         self._make_specs()
@@ -169,6 +190,8 @@ class PinballEnv(EnvBase):
         sim.state = state.reshape(self.num_envs, 4).clone()
         sim.step_count.zero_()
         sim.done.zero_()
+        sim.placed.fill_(True)
+        sim.ready = True
 
     def reset_raw(self, mask: torch.Tensor | None = None) -> torch.Tensor:
         """Restart the environments where ``mask`` is True (all if ``None``); observations.
@@ -186,6 +209,9 @@ class PinballEnv(EnvBase):
         sim.state = torch.where(mask[:, None], fresh, sim.state)
         sim.step_count = torch.where(mask, 0, sim.step_count)
         sim.done = sim.done & ~mask
+        if not sim.ready:
+            sim.placed = sim.placed | mask
+            sim.ready = bool(sim.placed.all())
         return self._shape(observation(sim.state), 4)
 
     def step_raw(self, action: torch.Tensor):
@@ -195,6 +221,8 @@ class PinballEnv(EnvBase):
         ``ValueError``.
         """
         sim = self._sim
+        if not sim.ready:
+            self._refuse_unplaced()
         action = torch.as_tensor(action, device=sim.state.device)
         if action.shape != self.batch_size:
             raise ValueError(
@@ -216,6 +244,15 @@ class PinballEnv(EnvBase):
             self._shape(reward),
             self._shape(terminated),
             self._shape(truncated),
+        )
+
+    def _refuse_unplaced(self):
+        unplaced = (~self._sim.placed).nonzero()[:, 0].tolist()
+        shown = ", ".join(map(str, unplaced[:8])) + (", ..." if len(unplaced) > 8 else "")
+        raise RuntimeError(
+            f"PinballEnv: call reset() before step(): {len(unplaced)} of {self.num_envs} "
+            f"environments (flat indices {shown}) have never been reset, and stepping them "
+            "would move a ball from (0, 0); reset them (reset(), reset_raw() or set_state())"
         )
 
     # ----------------------------------------------------------------- TorchRL API

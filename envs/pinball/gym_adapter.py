@@ -26,6 +26,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 
+from .grid import check_grid_size
 from .maps import MAP_NAMES, PinballMap, load_map
 from .physics import NUM_ACTIONS, pinball_step
 from .render import render_frame
@@ -55,10 +56,13 @@ class GymPinballEnv(gym.Env):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.pinball_map = map if isinstance(map, PinballMap) else load_map(map)
+        check_grid_size(self.pinball_map)  # refuse a map too large to simulate, up front
         self.render_mode = render_mode
         self.observation_space = spaces.Box(0.0, 1.0, shape=(4,), dtype=np.float64)
         self.action_space = spaces.Discrete(NUM_ACTIONS)
-        self._state = torch.zeros(1, 4, dtype=torch.float64)
+        # None until the first reset: step() refuses to move a ball that was never placed
+        # (gym.make's OrderEnforcing wrapper says so too, but the unwrapped env is public).
+        self._state = None
 
     def _obs(self) -> np.ndarray:
         x, y, vx, vy = self._state[0].tolist()
@@ -73,17 +77,50 @@ class GymPinballEnv(gym.Env):
         return self._obs(), {"state": self._state[0].numpy().copy()}
 
     def step(self, action):
-        if not self.action_space.contains(action):
-            raise ValueError(f"action must be an integer in 0..{NUM_ACTIONS - 1}, got {action!r}")
-        act = torch.tensor([int(action)], dtype=torch.int64)
+        if self._state is None:
+            raise RuntimeError(
+                "GymPinballEnv: call reset() before step(): the ball has not been placed yet"
+            )
+        act = torch.tensor([_check_action(action)], dtype=torch.int64)
         self._state, reward, terminated = pinball_step(self._state, act, self.pinball_map)
         info = {"state": self._state[0].numpy().copy()}
         return self._obs(), float(reward[0]), bool(terminated[0]), False, info
 
     def render(self):
         if self.render_mode == "rgb_array":
+            if self._state is None:
+                raise RuntimeError("GymPinballEnv: call reset() before render()")
             return render_frame(self.pinball_map, self._state[0])
         return None
+
+
+def _check_action(action) -> int:
+    """The action as an int in 0..4; ``TypeError`` for anything but an integer (a Python or
+    NumPy integer, or a 0-d integer array), ``ValueError`` out of range.
+
+    Why bools are refused although ``True == 1``: ``Discrete.contains(True)`` accepts them, and
+    a bool reaching ``step`` is almost always a mask or a done flag passed by mistake.
+
+    Example:
+        >>> _check_action(np.int64(3))
+        3
+        >>> _check_action(True)
+        Traceback (most recent call last):
+        ...
+        TypeError: action must be an integer in 0..4, got True (bool)
+    """
+    if isinstance(action, np.ndarray) and action.shape == ():
+        action = action[()]
+    if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
+        raise TypeError(
+            f"action must be an integer in 0..{NUM_ACTIONS - 1}, got {action!r} "
+            f"({type(action).__name__})"
+        )
+    if not 0 <= action < NUM_ACTIONS:
+        raise ValueError(
+            f"action must be an integer in 0..{NUM_ACTIONS - 1}, got {action!r} (out of range)"
+        )
+    return int(action)
 
 
 def register_gym_envs() -> None:
