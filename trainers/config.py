@@ -10,10 +10,11 @@ Example:
     >>> cfg = TrainConfig(map="pinball_hard_single", runs=4, episodes=10).resolved()
     >>> cfg.order, cfg.alpha, cfg.gamma, cfg.epsilon
     (5, 0.0005, 1.0, 0.01)
-    >>> TrainConfig(runs=0).validate()
-    Traceback (most recent call last):
-    ...
-    ValueError: runs must be >= 1, got 0
+    >>> try:
+    ...     TrainConfig(runs=0).validate()
+    ... except ValueError as err:  # a ConfigError, naming the fields at fault
+    ...     print(err, err.fields)
+    runs must be >= 1, got 0 ('runs',)
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import numbers
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,7 +31,8 @@ from typing import Any
 from skillchain_torch.discovery.readings import DEFAULT_READING as _DEFAULT
 from skillchain_torch.discovery.readings import InitiationReading
 
-__all__ = ["TrainConfig", "paper_defaults", "RESUME_FIELDS", "LEGACY_FIELDS", "UNREAD_FIELDS"]
+__all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "RESUME_FIELDS",
+           "LEGACY_FIELDS", "UNREAD_FIELDS", "INT64_MAX"]
 
 # Fields added after runs were published, with the behaviour every run before them had: a
 # saved config without one of them ran with this value (whatever today's default is).
@@ -56,6 +60,132 @@ UNREAD_FIELDS = {
 def paper_defaults(map_name: str) -> tuple[int, float]:
     """``(order, alpha)`` of the paper for a map: (5, 0.0005) on hard maps, else (4, 0.001)."""
     return (5, 0.0005) if "hard" in map_name else (4, 0.001)
+
+
+# Integer fields are stored in int64 tensors and arrays; agent p's random streams are keyed by
+# the int64 seed + p (CounterRNG, the initiation-set reservoirs, the environment's starts).
+INT64_MAX = 2**63 - 1
+# Memory a run needs besides its largest arrays (torch, the interpreter, buffers).
+_BASE_BYTES = 256 * 2**20
+
+
+class ConfigError(ValueError):
+    """A ``ValueError`` from :meth:`TrainConfig.validate`; ``fields`` names the config fields
+    at fault (so a front end can name its own flags)."""
+
+    def __init__(self, message: str, fields: tuple[str, ...] = ()):
+        super().__init__(message)
+        self.fields = tuple(fields)
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _type_problem(kind: str, value: Any) -> str | None:
+    """``None`` if ``value`` fits the annotation ``kind`` (``"int"``, ``"float | None"``, ...),
+    else what it must be."""
+    kinds = [k.strip() for k in kind.split("|")]
+    optional = "None" in kinds
+    base = next(k for k in kinds if k != "None")
+    if value is None and optional:
+        return None
+    if base == "int":
+        ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+        what = "an integer"
+    elif base == "float":
+        ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
+        what = "a number"
+    elif base == "bool":
+        ok = isinstance(value, bool)
+        what = "true or false"
+    else:
+        ok = isinstance(value, str) or (base == "str" and isinstance(value, os.PathLike)
+                                        and optional)
+        what = "a string"
+    return None if ok else what + (" or null" if optional else "")
+
+
+def _size(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"):
+        if n < 1024 or unit == "EiB":
+            return f"{n:,.0f} {unit}" if unit == "B" else f"{n:,.1f} {unit}"
+        n /= 1024
+    raise AssertionError  # pragma: no cover
+
+
+def available_memory(device: str = "cpu") -> int | None:
+    """Bytes of memory a new run can use now: ``MemAvailable`` (and the cgroup's limit) on
+    Linux, ``psutil`` elsewhere, the free CUDA memory for a CUDA device; ``None`` if unknown."""
+    import torch
+
+    dev = torch.device(device)
+    if dev.type == "cuda":
+        try:
+            return int(torch.cuda.mem_get_info(dev)[0])
+        except Exception:  # noqa: BLE001 - unknown is fine: no check
+            return None
+    if dev.type != "cpu":
+        return None
+    found = []
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    found.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        used = Path("/sys/fs/cgroup/memory.current").read_text().strip()
+        if limit != "max":
+            found.append(max(int(limit) - int(used), 0))
+    except (OSError, ValueError):
+        pass
+    if not found:
+        try:
+            import psutil
+
+            found.append(int(psutil.virtual_memory().available))
+        except Exception:  # noqa: BLE001 - no psutil: try sysconf
+            try:
+                found.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+            except (AttributeError, ValueError, OSError):
+                return None
+    return min(found)
+
+
+def _check_device(device: str) -> None:
+    """``ConfigError`` unless ``device`` names a torch device this machine has."""
+    import torch
+
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, ValueError, TypeError):
+        raise ConfigError(f"device must be a torch device such as cpu, cuda or cuda:0, got "
+                          f"{device!r}", ("device",)) from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            build = (f"CUDA {torch.version.cuda}" if torch.version.cuda
+                     else "a CPU-only build")  # fmt: skip
+            raise ConfigError(f"device {device!r} is not available: torch {torch.__version__} "
+                              f"({build}) sees no CUDA device; use cpu", ("device",))
+        count = torch.cuda.device_count()
+        if dev.index is not None and dev.index >= count:
+            raise ConfigError(f"device {device!r} is not available: this machine has {count} "
+                              f"CUDA device(s), cuda:0 to cuda:{count - 1}", ("device",))
+    elif dev.type == "meta":
+        raise ConfigError("device 'meta' holds no data (shapes only); use cpu or cuda",
+                          ("device",))
+    elif dev.type != "cpu":
+        try:
+            torch.zeros(1, device=dev)
+        except Exception as err:  # noqa: BLE001 - torch raises many types for absent devices
+            text = " ".join(str(err).split()) or type(err).__name__
+            first = text.split(". ")[0][:120]
+            raise ConfigError(f"device {device!r} is not available here ({first})",
+                              ("device",)) from None
 
 
 @dataclass(frozen=True)
@@ -153,17 +283,31 @@ class TrainConfig:
             alpha=alpha if self.alpha is None else float(self.alpha),
         )
 
-    def validate(self) -> TrainConfig:
-        """Raise ``ValueError`` naming the first impossible field; returns ``self``."""
+    def validate(self, memory: bool = True) -> TrainConfig:
+        """Raise :class:`ConfigError` (a ``ValueError``) naming the first impossible field;
+        returns ``self``.
+
+        Checks each field's type (a ``config.json`` may hold anything), its range (integers
+        fit int64; agent p's seed ``seed + p`` is in [0, 2^63 - 1]), that ``device`` exists
+        here, and, with ``memory``, that the run's largest arrays (:meth:`memory_estimate`)
+        fit in the memory available now.
+        """
         from skillchain_torch.agents.hierarchical import FAILURE_BOOTSTRAPS
         from skillchain_torch.discovery.gestation import POLICY_STARTS, VALUE_STARTS
         from skillchain_torch.envs.pinball import MAP_NAMES
         from skillchain_torch.trainers.agents import AGENTS
 
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            what = _type_problem(str(field.type), value)
+            if what is not None:
+                raise ConfigError(f"{field.name} must be {what}, got {_short(value)}",
+                                  (field.name,))
         if self.agent not in AGENTS:
-            raise ValueError(f"agent must be one of {', '.join(AGENTS)}, got {self.agent!r}")
+            raise ConfigError(f"agent must be one of {', '.join(AGENTS)}, got {self.agent!r}",
+                              ("agent",))
         if self.map not in MAP_NAMES:
-            raise ValueError(f"unknown map {self.map!r}; known maps: {', '.join(MAP_NAMES)}")
+            raise ConfigError(f"unknown map {self.map!r}; known maps: {', '.join(MAP_NAMES)}")
         checks = [
             ("runs", self.runs, self.runs >= 1, ">= 1"),
             ("episodes", self.episodes, self.episodes >= 1, ">= 1"),
@@ -199,24 +343,93 @@ class TrainConfig:
             )
         if self.agent == "given-options":
             if self.options is None:
-                raise ValueError(
-                    "agent 'given-options' needs options: an OptionBank file (--options)"
+                raise ConfigError(
+                    "agent 'given-options' needs options: an OptionBank file (--options)",
+                    ("options",),
                 )
             if not Path(self.options).is_file():
-                raise ValueError(f"options file {self.options!r} does not exist")
+                raise ConfigError(f"options file {self.options!r} does not exist", ("options",))
         for name, value, ok, rule in checks:
             if not ok:
-                raise ValueError(f"{name} must be {rule}, got {value}")
+                raise ConfigError(f"{name} must be {rule}, got {value}", (name,))
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if (field.name != "seed" and isinstance(value, numbers.Integral)
+                    and not isinstance(value, bool) and value > INT64_MAX):
+                raise ConfigError(f"{field.name} must be at most 2^63 - 1 = {INT64_MAX} (an "
+                                  f"int64), got {value}", (field.name,))  # fmt: skip
+        if not 0 <= self.seed <= INT64_MAX - (self.runs - 1):
+            raise ConfigError(
+                f"seed must be in [0, {INT64_MAX - (self.runs - 1)}] (agent p uses seed + p, "
+                f"an int64 random-stream key, p < runs = {self.runs}), got {self.seed}",
+                ("seed",),
+            )
         try:
             reading = self.reading
         except ValueError as err:
-            raise ValueError(str(err).replace("reading start", "initiation_start").replace(
+            message = str(err).replace("reading start", "initiation_start").replace(
                 "reading constrain", "initiation_constrain").replace(
-                "reading gestation_positives", "gestation_positives")) from None
+                "reading gestation_positives", "gestation_positives")
+            fields = tuple(n for n in ("initiation_start", "initiation_constrain",
+                                       "gestation_positives", "one_class_fits") if n in message)
+            raise ConfigError(message, fields) from None
         if reading.start == "biased" and not self.initiation_bias > 0:
-            raise ValueError(f"initiation_start 'biased' needs initiation_bias > 0, got "
-                             f"{self.initiation_bias}")  # fmt: skip
+            raise ConfigError(f"initiation_start 'biased' needs initiation_bias > 0, got "
+                              f"{self.initiation_bias}", ("initiation_start", "initiation_bias"))
+        _check_device(self.device)
+        if memory:
+            self._check_memory()
         return self
+
+    def memory_estimate(self) -> list[tuple[tuple[str, ...], str, int, bool]]:
+        """Lower bounds of the bytes of the run's largest arrays: ``(fields, what, bytes,
+        on_device)`` per array family (``on_device``: torch tensors on ``device``; else numpy
+        arrays in host memory). Sizes only: nothing is allocated.
+
+        The returns and lengths (and skill chaining's option counts) are ``[runs, episodes]``
+        int64/float64 arrays; the top-level Q weights and features take ``runs x (decisions
+        + 1) x (order + 1)^4`` float64 (5 primitives, plus ``slots`` options in skill
+        chaining); each skill-chaining option slot holds an order-3 Q-head (5 x 256 float64)
+        and a 500-example initiation-set store (500 x 4 float64 and labels).
+        """
+        runs, episodes = int(self.runs), int(self.episodes)
+        order = paper_defaults(self.map)[0] if self.order is None else int(self.order)
+        chaining = self.agent == "skill-chaining"
+        decisions = 5 + (int(self.slots) if chaining else 0)
+        features = (order + 1) ** 4
+        terms = [
+            (("runs", "episodes"), "returns and lengths [runs, episodes]",
+             runs * episodes * 8 * (3 if chaining else 2), False),
+            (("runs", "order", "slots") if chaining else ("runs", "order"),
+             "Q weights [runs, decisions, (order+1)^4 features]",
+             runs * (decisions + 1) * features * 8 + features * 4 * 8, True),
+        ]
+        if chaining:
+            per_slot = 5 * 256 * 8 + 500 * (4 * 8 + 1) + 15 * 8
+            terms.append((("runs", "slots"), "option banks [runs, slots, ...]",
+                          runs * int(self.slots) * per_slot, True))
+        return terms
+
+    def _check_memory(self) -> None:
+        import torch
+
+        terms = self.memory_estimate()
+        on_cpu = torch.device(self.device).type == "cpu"
+        pools = [(terms if on_cpu else [t for t in terms if not t[3]], "cpu")]
+        if not on_cpu:
+            pools.append(([t for t in terms if t[3]], self.device))
+        for pool, device in pools:
+            need = sum(t[2] for t in pool) + (_BASE_BYTES if device == "cpu" else 0)
+            have = available_memory(device)
+            if have is None or need <= have:
+                continue
+            fields, what, size, _ = max(pool, key=lambda t: t[2])
+            values = self.resolved().to_dict()
+            named = " x ".join(f"{f} {values[f]}" for f in fields)
+            where = "memory" if device == "cpu" else f"{device} memory"
+            raise ConfigError(
+                f"the run needs an estimated {_size(need)} of {where} for {named} ({what}: "
+                f"{_size(size)}), more than the {_size(have)} available", fields)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
