@@ -18,14 +18,16 @@ Invalid arguments exit with status 2 and a message.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import os
 import platform
 import shutil
 import sys
 from pathlib import Path
 
 from .agents import AGENTS
-from .config import TrainConfig
+from .config import UNREAD_FIELDS, TrainConfig
 
 __all__ = ["main", "build_parser"]
 
@@ -41,6 +43,9 @@ OUTPUTS = (
     "n_options.npy",
     "option_tree.json",
     "option_trajectory.png",
+    "diverged.json",  # a diverged run's returns so far (PopulationTrainer.DIVERGED_OUTPUTS)
+    "partial_returns.npy",
+    "partial_lengths.npy",
 )
 # Options that define the run; with --resume the saved config is used instead.
 CONFIG_OPTIONS = (
@@ -378,6 +383,24 @@ def _verify(parser, args) -> int:
     return 0 if ok else 1
 
 
+def _flag(name: str) -> str:
+    """The ``skillchain train`` flag of a config field."""
+    return "--wait-for-both-classes" if name == "one_class_fits" else "--" + name.replace("_", "-")
+
+
+def _given(args) -> list[str]:
+    """The config fields set on the command line (``--device`` included)."""
+    names = [n for n in CONFIG_OPTIONS if getattr(args, n) is not None]
+    return names + (["device"] if args.device is not None else [])
+
+
+def _flag_message(err: ValueError, given) -> str:
+    """``err``'s message led by the flags of the fields at fault that were given on the
+    command line (``--seed: seed must be ...``)."""
+    flags = [_flag(name) for name in getattr(err, "fields", ()) if name in given]
+    return ", ".join(flags) + ": " + str(err) if flags else str(err)
+
+
 def _config_from_args(parser, args) -> TrainConfig:
     given = {name: getattr(args, name) for name in CONFIG_OPTIONS}
     given = {k: v for k, v in given.items() if v is not None}
@@ -387,75 +410,199 @@ def _config_from_args(parser, args) -> TrainConfig:
         given["keep_negatives"] = given["keep_negatives"] == "on"
     if args.device is not None:
         given["device"] = args.device
+    agent = given.get("agent", TrainConfig().agent)
+    unread = [n for n in UNREAD_FIELDS.get(agent, ()) if n in given]
+    if unread:
+        readers = {n: [a for a in sorted(AGENTS) if n not in UNREAD_FIELDS.get(a, ())]
+                   for n in unread}
+        parser.error(f"--agent {agent} does not read " + ", ".join(
+            f"{_flag(n)} (only {' or '.join(readers[n]) or 'no agent'})" for n in unread)
+            + "; leave them out or choose that --agent")
     try:
         return TrainConfig(**given).validate().resolved()
     except ValueError as err:
-        parser.error(str(err))
+        parser.error(_flag_message(err, given))
 
 
-def _prepare_out(parser, out: Path, overwrite: bool) -> None:
-    if out.exists() and not out.is_dir():
-        parser.error(f"--out {out} exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()):
-        if not overwrite:
-            parser.error(
-                f"--out {out} exists and is not empty; pass --resume {out} to continue "
-                "it or --overwrite to replace it"
-            )
-        for name in OUTPUTS:
-            target = out / name
+def _one_line(message) -> str:
+    """``message`` on one line (torch's and numpy's errors span several)."""
+    return " ".join(str(message).split())
+
+
+def _fail(parser, message: str) -> None:
+    """Exit with status 2 and one line (for failures that are not about the arguments' form)."""
+    parser.exit(2, f"{parser.prog}: error: {message}\n")
+
+
+def _check_out(parser, out: Path, overwrite: bool) -> None:
+    """Refuse an ``--out`` that cannot take the run, writing nothing."""
+    try:
+        if out.exists() and not out.is_dir():
+            parser.error(f"--out {out} exists and is not a directory")
+        if out.is_dir():
+            if any(out.iterdir()) and not overwrite:
+                parser.error(
+                    f"--out {out} exists and is not empty; pass --resume {out} to continue "
+                    "it or --overwrite to replace it"
+                )
+            if not os.access(out, os.W_OK | os.X_OK):
+                parser.error(f"--out {out}: the directory is not writable")
+            return
+        parent = next(p for p in out.absolute().parents if p.exists())
+    except OSError as err:
+        parser.error(f"--out {out}: cannot use it ({err.strerror or err})")
+    if not parent.is_dir():
+        parser.error(f"--out {out}: {parent} is a file, so no directory can be created under it")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        parser.error(f"--out {out}: cannot create it, {parent} is not writable")
+
+
+def _prepare_out(parser, out: Path, overwrite: bool) -> Path | None:
+    """Create ``out`` (or clear a previous run's outputs from it, with ``overwrite``); returns
+    the topmost directory this call created (``None`` if ``out`` existed)."""
+    missing = [p for p in (out.absolute(), *out.absolute().parents) if not p.exists()]
+    created = missing[-1] if missing else None
+    try:
+        if out.is_dir() and any(out.iterdir()) and overwrite:
+            _remove_outputs(out, strict=True)
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        _remove_created(created)
+        _fail(parser, f"--out {out}: cannot write there ({err.strerror or err})")
+    return created
+
+
+def _remove_created(created: Path | None) -> None:
+    if created is not None:
+        shutil.rmtree(created, ignore_errors=True)
+
+
+def _remove_outputs(out: Path, strict: bool = False) -> None:
+    """Remove a run's outputs (``OUTPUTS``) from ``out``; ``strict``: raise ``OSError``s."""
+    for name in OUTPUTS:
+        target = out / name
+        try:
             if target.is_dir():
                 shutil.rmtree(target)
             elif target.exists():
                 target.unlink()
-    out.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            if strict:
+                raise
+
+
+def _write_error(err: BaseException) -> str | None:
+    """A one-line reason if ``err`` is a failure to write a file (a full disk, a read-only or
+    removed directory; torch.save reports its own as RuntimeError), else ``None``."""
+    if isinstance(err, OSError):
+        where = f" ({err.filename})" if getattr(err, "filename", None) else ""
+        return f"{err.strerror or err}{where}"
+    text = str(err)
+    if isinstance(err, RuntimeError) and ("PytorchStreamWriter" in text
+                                          or "file write failed" in text):
+        return " ".join(text.split())[:200]
+    return None
+
+
+# torch.set_num_threads takes a C int; more threads than 4 per core only wait for each other.
+MAX_THREADS_PER_CPU = 4
 
 
 def _train(parser, args) -> int:
-    from .checkpoint import latest_checkpoint, load_checkpoint
+    """Everything is checked (arguments, the saved config, --out, building the agents) before
+    anything is written, so a refused command leaves nothing that blocks the corrected one."""
+    from .checkpoint import latest_checkpoint, resume_checkpoint
     from .population import PopulationTrainer
 
+    max_threads = MAX_THREADS_PER_CPU * (os.cpu_count() or 1)
     if args.threads < 1:
         parser.error(f"--threads must be >= 1, got {args.threads}")
+    if args.threads > max_threads:
+        parser.error(f"--threads must be at most {max_threads} ({MAX_THREADS_PER_CPU} per CPU "
+                     f"of this machine), got {args.threads}")  # fmt: skip
+    native = False if args.torch_only else None
+    created = None
     if args.resume is not None:
-        given = [f"--{n.replace('_', '-')}" for n in CONFIG_OPTIONS if getattr(args, n) is not None]
-        if given:
-            parser.error(
-                "--resume continues with the saved config; do not pass " + ", ".join(given)
-            )
         out = args.resume
-        if not (out / "config.json").is_file():
+        given = [_flag(n) for n in CONFIG_OPTIONS if getattr(args, n) is not None]
+        given += ["--out"] * (args.out is not None) + ["--overwrite"] * args.overwrite
+        if given:
+            parser.error(f"--resume continues with the saved config, writing into {out}; do "
+                         f"not pass " + ", ".join(given))  # fmt: skip
+        path = out / "config.json"
+        if not path.is_file():
             parser.error(f"--resume {out}: no config.json there (not a run directory)")
         try:
-            config = TrainConfig.load_json(out / "config.json").validate()
+            config = TrainConfig.load_json(path)
         except ValueError as err:
             parser.error(str(err))
         if args.device is not None:
-            config = TrainConfig.from_dict({**config.to_dict(), "device": args.device})
-        path = latest_checkpoint(out)
-        if path is None:
-            parser.error(f"--resume {out}: no checkpoint under {out / 'checkpoints'}")
-        trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads,
-                                    native=False if args.torch_only else None)
+            config = dataclasses.replace(config, device=args.device)
         try:
-            load_checkpoint(path, trainer)
+            config.validate()
         except ValueError as err:
-            parser.error(str(err))
+            if getattr(err, "fields", ()) == ("device",) and args.device is not None:
+                parser.error(_flag_message(err, ["device"]))
+            hint = " (resume with --device cpu)" if "device" in getattr(err, "fields", ()) else ""
+            parser.error(f"{path}: {err}{hint}")
+        checkpoint = latest_checkpoint(out)
+        if checkpoint is None:
+            parser.error(f"--resume {out}: no checkpoint under {out / 'checkpoints'}")
+        try:
+            trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads,
+                                        native=native)
+            checkpoint = resume_checkpoint(out, trainer)  # damaged newer ones: the one before
+        except ValueError as err:
+            parser.error(_one_line(err))
         if not args.quiet:
-            print(f"resuming {out} from {path.name}", file=sys.stderr)
+            print(f"resuming {out} from {checkpoint.name}", file=sys.stderr)
     else:
         if args.out is None:
             parser.error("--out DIR is required (or --resume DIR)")
         config = _config_from_args(parser, args)
         out = args.out
-        _prepare_out(parser, out, args.overwrite)
-        config.save_json(out / "config.json")
-        trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads,
-                                    native=False if args.torch_only else None)
-    return _run(trainer, out, quiet=args.quiet)
+        _check_out(parser, out, args.overwrite)
+        try:
+            trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads,
+                                        native=native)
+        except ValueError as err:
+            parser.error(_one_line(_flag_message(err, _given(args))))
+        created = _prepare_out(parser, out, args.overwrite)
+        try:
+            config.save_json(out / "config.json")
+        except OSError as err:
+            _remove_created(created)
+            _fail(parser, f"--out {out}: cannot write there ({_write_error(err)})")
+    return _run(trainer, out, quiet=args.quiet, parser=parser, created=created)
 
 
-def _run(trainer, out: Path, quiet: bool) -> int:
+def _run(trainer, out: Path, quiet: bool, parser=None, created: Path | None = None) -> int:
+    """Train and write the outputs; a failure to write (a full disk, a read-only directory)
+    exits with status 2 and one line, removing ``created`` (the directory this command made)
+    when it holds no checkpoint to resume from."""
+    try:
+        return _train_and_write(trainer, out, quiet)
+    except FloatingPointError as err:  # a learner diverged; the trainer saved what it had
+        if parser is None:
+            raise
+        _fail(parser, _one_line(err))
+    except (OSError, RuntimeError) as err:
+        reason = _write_error(err)
+        if reason is None or parser is None:
+            raise
+    from .checkpoint import latest_checkpoint
+
+    if latest_checkpoint(out) is not None:
+        hint = f"; once it can be written, continue with: skillchain train --resume {out}"
+    else:  # nothing to resume: leave nothing that would refuse the same command again
+        _remove_created(created)
+        if created is None:
+            _remove_outputs(out)
+        hint = "; nothing to resume (no checkpoint was written), run the same command again"
+    _fail(parser, f"cannot write the run's outputs in {out}: {reason}{hint}")
+
+
+def _train_and_write(trainer, out: Path, quiet: bool) -> int:
     import torch
 
     from .logging import TensorBoardHook
@@ -479,6 +626,10 @@ def _run(trainer, out: Path, quiet: bool) -> int:
         tb.close()
         print(f"\ninterrupted; continue with: skillchain train --resume {out}", file=sys.stderr)
         return 130
+    except FloatingPointError:  # a learner diverged: _run reports it
+        bar.close()
+        tb.close()
+        raise
     tb.close()
     trainer.write_results(out)
     if discovery is not None:

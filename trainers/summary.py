@@ -82,15 +82,46 @@ def format_summary(summary: dict, wall_time: float | None = None) -> str:
 def summarize_dir(out_dir: str | Path) -> str:
     """The formatted summary of a run directory (wall time from ``run_info.json`` if any)."""
     out = Path(out_dir)
-    try:
-        returns = np.load(out / "returns.npy")
-        lengths = np.load(out / "lengths.npy")
-    except OSError as err:
-        raise ValueError(f"{out}: not a finished run directory ({err})") from None
+    for name in ("returns.npy", "lengths.npy"):
+        if not (out / name).is_file():
+            raise ValueError(f"{out}: not a finished run directory (no {name})")
+    returns = _load_runs_array(out / "returns.npy", "float64")
+    lengths = _load_runs_array(out / "lengths.npy", "int64")
+    if lengths.shape != returns.shape:
+        raise ValueError(f"{out / 'lengths.npy'}: shape {lengths.shape} does not match "
+                         f"returns.npy's {returns.shape} (expected [runs, episodes] in both)")
     if np.isnan(returns).any():
         raise ValueError(f"{out}/returns.npy: the run is not finished (NaN returns)")
+    if not np.isfinite(returns).all():
+        raise ValueError(f"{out / 'returns.npy'}: holds infinite returns")
+    if (lengths < 0).any():
+        raise ValueError(f"{out / 'lengths.npy'}: holds negative episode lengths")
     wall = None
     info = out / "run_info.json"
     if info.is_file():
-        wall = json.loads(info.read_text()).get("wall_time_s")
+        try:
+            data = json.loads(info.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+            raise ValueError(f"{info}: not readable JSON ({err})") from None
+        wall = data.get("wall_time_s") if isinstance(data, dict) else None
+        if wall is not None and (isinstance(wall, bool) or not isinstance(wall, (int, float))):
+            raise ValueError(f"{info}: wall_time_s must be a number, got {wall!r}")
     return format_summary(summarize(returns, lengths), wall)
+
+
+def _load_runs_array(path: Path, kind: str) -> np.ndarray:
+    """``path`` as a 2-d ``[runs, episodes]`` numeric array (``kind``: its expected dtype, for
+    the message); ``ValueError`` naming the file and the expected shape otherwise."""
+    expected = f"a {kind} .npy array of shape [runs, episodes] with runs, episodes >= 1"
+    try:
+        array = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as err:
+        reason = " ".join(str(err).split()).split(". ")[0][:120]
+        raise ValueError(f"{path}: not a readable .npy array ({reason}); expected {expected}") \
+            from None
+    if not isinstance(array, np.ndarray) or array.dtype.kind not in "iuf":
+        raise ValueError(f"{path}: holds {getattr(array, 'dtype', type(array).__name__)} "
+                         f"values; expected {expected}")
+    if array.ndim != 2 or 0 in array.shape:
+        raise ValueError(f"{path}: shape {tuple(array.shape)}; expected {expected}")
+    return array
