@@ -37,7 +37,8 @@ __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "
 # Fields added after runs were published, with the behaviour every run before them had: a
 # saved config without one of them ran with this value (whatever today's default is).
 LEGACY_FIELDS = {"failure_bootstrap": "decision", "keep_negatives": False, "policy_start": "zero",
-                 "value_start": "max-sample", "value_bonus": 0.0}
+                 "value_start": "max-sample", "value_bonus": 0.0, "option_alpha": 0.0005,
+                 "completion_reward": 10_000.0}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
@@ -218,7 +219,7 @@ class TrainConfig:
         gestation_positives, initiation_start, initiation_constrain, one_class_fits: the
             initiation-set reading of skill chaining (see
             :class:`~skillchain_torch.discovery.InitiationReading`); the defaults are
-            :data:`~skillchain_torch.discovery.DEFAULT_READING` (the first reading; see
+            :data:`~skillchain_torch.discovery.DEFAULT_READING` (``pos20-fitted-cstart``; see
             ``results/screening/README.md``).
         failure_bootstrap: what a timed-out option execution's SMDP target bootstraps on
             (``"decision"``: Sarsa's ``Q(s', d')``, the paper; ``"primitives"``: the best
@@ -262,10 +263,10 @@ class TrainConfig:
     one_class_fits: bool = _DEFAULT.one_class_fits
     failure_bootstrap: str = "primitives"
     keep_negatives: bool = True
-    policy_start: str = "zero"
-    option_alpha: float = 0.0005
+    policy_start: str = "top-level"
+    option_alpha: float = 0.0
     completion_reward: float = 10_000.0
-    value_start: str = "max-sample"
+    value_start: str = "agent"
     value_bonus: float = 0.0
 
     @property

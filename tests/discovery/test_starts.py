@@ -142,6 +142,6 @@ def test_a_flat_run_does_not_differ_from_a_config_that_changes_option_settings()
     assert flat.mismatches(other) == []
     assert flat.mismatches(TrainConfig(agent="flat", runs=3)) == ["runs"]
     sc = TrainConfig(agent="skill-chaining", runs=2)
-    changed = TrainConfig(agent="skill-chaining", runs=2, policy_start="top-level")
+    changed = TrainConfig(agent="skill-chaining", runs=2, policy_start="zero")
     assert sc.mismatches(changed) == ["policy_start"]  # skill chaining reads it
     assert "agent" in flat.mismatches(sc)
