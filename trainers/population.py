@@ -302,6 +302,8 @@ class PopulationTrainer:
         if cfg.agent == "given-options":
             advice = (f"their step size (alpha {alpha:g}) is the one saved in --options "
                       f"{cfg.options}" if alpha is not None else "")
+        elif cfg.option_alpha == 0:  # they never learn: a joining option copies the top level
+            advice = f"they only copy the top-level Q-head: lower --alpha (now {cfg.alpha:g})"
         else:
             advice = f"lower --option-alpha (now {cfg.option_alpha:g})"
         classifier = bank.classifier

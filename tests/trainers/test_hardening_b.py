@@ -5,6 +5,7 @@ The command-line cases run the ``skillchain`` console script in a subprocess: ea
 with status 2 and one ``skillchain train: error:`` line (no traceback), or run correctly.
 """
 
+import dataclasses
 import json
 import logging
 import os
@@ -84,7 +85,7 @@ def test_diverged_given_options_run_stops(tmp_path):
 
 
 SC = TrainConfig(agent="skill-chaining", map="pinball_box", runs=2, episodes=4,
-                 max_episode_steps=300, checkpoint_every=1, slots=2)
+                 max_episode_steps=300, checkpoint_every=1, slots=2, option_alpha=0.0005)
 
 
 class Poison:
@@ -97,6 +98,19 @@ class Poison:
     def __call__(self, trainer, batch):
         if batch.population_episode == self.episode:
             self.tensor(trainer)[self.agent].view(-1)[0] = self.value
+
+
+def test_frozen_options_point_at_the_top_level_step_size(tmp_path):
+    """With the default ``option_alpha = 0`` option heads only copy the top level's, so a
+    non-finite option head is the top level's divergence: the advice names ``--alpha``."""
+    cfg = dataclasses.replace(SC, option_alpha=0.0)
+    trainer = PopulationTrainer(cfg, out_dir=tmp_path)
+    trainer.register_op("post_episodes",
+                        Poison(lambda t: t.agent.bank.q_head.weight, 1, 2, float("nan")))
+    with pytest.raises(Diverged) as info:
+        trainer.train()
+    assert "they only copy the top-level Q-head: lower --alpha (now 0.001)" in str(info.value)
+    assert "--option-alpha" not in str(info.value)
 
 
 @pytest.mark.parametrize(
