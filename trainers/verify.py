@@ -6,8 +6,11 @@ re-run on its own from the directory's ``config.json`` in a fraction of the run'
 its returns and lengths must equal row ``p`` of ``returns.npy`` and ``lengths.npy`` exactly.
 
 A given-options run whose agents took saved agent ``p mod N``'s options (``--options-agent
-each``) re-runs agent ``p`` with saved agent ``p mod N``'s; its options file must be present
-(``config.options``, read as given or relative to the run directory's parent folders).
+each``) re-runs agent ``p`` with saved agent ``p mod N``'s, from its options file
+(``config.options``, read as given or relative to the run directory's parent folders). Option
+banks are often too big to publish: when the file is absent but the folder it was written to
+holds the skill-chaining run's ``config.json`` and arrays, that agent's options are rebuilt by
+re-running the skill-chaining agent alone (the seed contract again), which verifies it too.
 
 Example:
     >>> import tempfile, numpy as np
@@ -50,8 +53,17 @@ def _saved_population(path: Path) -> int:
     return OptionBank.load(path).population
 
 
+def _source_run(options: str, run_dir: Path) -> Path | None:
+    """The skill-chaining run directory that wrote ``options`` (``DIR/options.pt``), if present."""
+    for base in (run_dir, *run_dir.resolve().parents):
+        source = (base / options).parent
+        if all((source / n).is_file() for n in ("config.json", "returns.npy", "lengths.npy")):
+            return source
+    return None
+
+
 def verify_run(run_dir: str | Path, agents, native: bool | None = None,
-               progress: bool = False) -> list[dict]:  # fmt: skip
+               progress: bool = False, _keep: Path | None = None) -> list[dict]:  # fmt: skip
     """Re-run ``agents`` of the run in ``run_dir`` one at a time; one dict per agent with
     ``agent``, ``seed``, ``match``, ``returns_match``, ``lengths_match``, ``first_difference``
     (the first episode that differs, or ``None``) and ``wall_time_s``.
@@ -75,30 +87,38 @@ def verify_run(run_dir: str | Path, agents, native: bool | None = None,
         info = json.loads((run_dir / "run_info.json").read_text())
         native = False if info.get("compiled_agent") is False else None
     changes = {}
-    saved = None
+    saved = source = None
     if config.agent == "given-options":
         path = resolve_options_path(config.options, run_dir)
-        if not path.is_file():
-            raise ValueError(f"{run_dir}: its options file {config.options!r} is not here "
-                             f"(given-options runs need it to be re-run)")  # fmt: skip
-        changes["options"] = str(path)
-        if config.options_agent is None:
-            saved = _saved_population(path)
+        if path.is_file():
+            changes["options"] = str(path)
+            if config.options_agent is None:
+                saved = _saved_population(path)
+        elif (source := _source_run(config.options, run_dir)) is None:
+            raise ValueError(f"{run_dir}: its options file {config.options!r} is not here, nor "
+                             f"the skill-chaining run that wrote it (given-options runs need "
+                             f"one of them to be re-run)")  # fmt: skip
+    for p in agents:
+        if not 0 <= int(p) < config.runs:
+            raise ValueError(f"agent {p} is not in {run_dir} (agents 0..{config.runs - 1})")
     results = []
     for p in agents:
         p = int(p)
-        if not 0 <= p < config.runs:
-            raise ValueError(f"agent {p} is not in {run_dir} (agents 0..{config.runs - 1})")
         single = dataclasses.replace(config, runs=1, seed=config.seed + p, checkpoint_every=0,
                                      **changes)  # fmt: skip
         if saved is not None:
             single = dataclasses.replace(single, options_agent=p % saved)
+        if source is not None:
+            single = _rebuilt_options(single, source, p, config.options_agent, native, progress)
         trainer = PopulationTrainer(single, native=native)
         trainer.train()
         same_r = np.array_equal(trainer.returns[0], returns[p], equal_nan=True)
         same_l = np.array_equal(trainer.lengths[0], lengths[p])
         differ = np.nonzero((trainer.returns[0] != returns[p]) | (trainer.lengths[0] != lengths[p]))
         first = int(differ[0][0]) + 1 if differ[0].size else None
+        if _keep is not None and same_r and same_l:  # a verified agent's options, to rebuild
+            _keep.parent.mkdir(parents=True, exist_ok=True)  # a given-options run from them
+            trainer.agent.bank.save(_keep)
         results.append({"agent": p, "seed": single.seed, "match": same_r and same_l,
                         "returns_match": same_r, "lengths_match": same_l,
                         "first_difference": first, "wall_time_s": trainer.elapsed,
@@ -109,3 +129,21 @@ def verify_run(run_dir: str | Path, agents, native: bool | None = None,
                   + ("" if first is None else f" from episode {first}")
                   + f" ({r['agent_steps']:,} steps, {r['wall_time_s']:.1f} s)", flush=True)
     return results
+
+
+def _rebuilt_options(single: TrainConfig, source: Path, p: int, options_agent, native,
+                     progress: bool) -> TrainConfig:  # fmt: skip
+    """``single`` with its options rebuilt: the source run's agent (``options_agent``, or ``p``
+    mod its runs) re-run alone and verified, its bank saved beside the source run (a
+    ``verify-options/`` cache, reused by the next verify)."""
+    runs = TrainConfig.load_json(source / "config.json").runs
+    q = options_agent if options_agent is not None else p % runs
+    cache = source / "verify-options" / f"agent{q}.pt"
+    if not cache.is_file():
+        [check] = verify_run(source, [q], native=native, progress=progress, _keep=cache)
+        if not check["match"]:
+            raise ValueError(f"{source}: agent {q} does not reproduce (episode "
+                             f"{check['first_difference']}), so its options cannot be rebuilt")  # fmt: skip
+    elif progress:
+        print(f"options of {source} agent {q}: {cache}", flush=True)
+    return dataclasses.replace(single, options=str(cache), options_agent=0)
