@@ -77,6 +77,8 @@ CONFIG_OPTIONS = (
     "value_bonus",
     "option_alpha",
     "completion_reward",
+    "gestation",
+    "convergence_threshold",
 )
 
 
@@ -230,7 +232,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--option-alpha",
         type=float,
         default=None,
-        help="the options' Q-learning step size (default: the paper's 0.0005)",
+        help="the options' Q-learning step size after they join (default 0: an option keeps "
+        "the policy it joins with; the paper: 0.0005)",
+    )
+    train.add_argument(
+        "--gestation",
+        type=int,
+        default=None,
+        help="episodes a new option gestates before it can be chosen (default: the paper's 10)",
+    )
+    train.add_argument(
+        "--convergence-threshold",
+        type=float,
+        default=None,
+        help="an initiation set is learned, and becomes a target event, when its weights moved "
+        "less than this per episode twice in a row (default: the paper's 0.15)",
     )
     train.add_argument(
         "--completion-reward",

@@ -49,7 +49,7 @@ RESUME_FIELDS = ("checkpoint_every", "device")
 _DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestation_positives",
                      "initiation_start", "initiation_constrain", "one_class_fits",
                      "keep_negatives", "policy_start", "value_start", "value_bonus",
-                     "option_alpha")
+                     "option_alpha", "gestation", "convergence_threshold")
 UNREAD_FIELDS = {
     "flat": _DISCOVERY_FIELDS + ("options", "options_agent", "failure_bootstrap",
                                  "completion_reward"),
@@ -234,6 +234,10 @@ class TrainConfig:
             options keep the step size of the run that discovered them.
         completion_reward: ``C``, added to an option's reward when its target fires (the paper
             does not give it; 10,000 is the task's goal reward).
+        gestation: episodes a new option gestates before it joins the repertoire (paper: 10).
+        convergence_threshold: an initiation set is learned (and becomes a target event) when
+            its classifier's weights moved on average less than this per episode, twice in a
+            row (paper: 0.15).
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -268,6 +272,8 @@ class TrainConfig:
     completion_reward: float = 10_000.0
     value_start: str = "agent"
     value_bonus: float = 0.0
+    gestation: int = 10
+    convergence_threshold: float = 0.15
 
     @property
     def reading(self):
@@ -322,6 +328,10 @@ class TrainConfig:
              self.failure_bootstrap in FAILURE_BOOTSTRAPS,
              f"one of {', '.join(FAILURE_BOOTSTRAPS)}"),
             ("value_bonus", self.value_bonus, math.isfinite(self.value_bonus), "finite"),
+            ("gestation", self.gestation, 0 <= self.gestation <= 1_000_000, "in [0, 10^6]"),
+            ("convergence_threshold", self.convergence_threshold,
+             math.isfinite(self.convergence_threshold) and self.convergence_threshold > 0,
+             "finite and > 0"),
             ("option_alpha", self.option_alpha,
              math.isfinite(self.option_alpha) and self.option_alpha >= 0, ">= 0 and finite"),
             ("completion_reward", self.completion_reward,

@@ -48,5 +48,6 @@ class SkillChainingRunAgent(SkillChainingAgent):
                          failure_bootstrap=cfg.failure_bootstrap, native=native,
                          reading=cfg.reading, policy_start=cfg.policy_start,
                          value_start=cfg.value_start, value_bonus=cfg.value_bonus,
-                         completion_reward=cfg.completion_reward)
+                         completion_reward=cfg.completion_reward, gestation=cfg.gestation,
+                         convergence_threshold=cfg.convergence_threshold)
         self.config = cfg

@@ -142,8 +142,9 @@ def _rebuilt_options(single: TrainConfig, source: Path, p: int, options_agent, n
     if not cache.is_file():
         [check] = verify_run(source, [q], native=native, progress=progress, _keep=cache)
         if not check["match"]:
-            raise ValueError(f"{source}: agent {q} does not reproduce (episode "
-                             f"{check['first_difference']}), so its options cannot be rebuilt")  # fmt: skip
+            episode = check["first_difference"]
+            raise ValueError(f"{source}: agent {q} does not reproduce (episode {episode}), "
+                             f"so its options cannot be rebuilt")  # fmt: skip
     elif progress:
         print(f"options of {source} agent {q}: {cache}", flush=True)
     return dataclasses.replace(single, options=str(cache), options_agent=0)

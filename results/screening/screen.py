@@ -14,7 +14,8 @@ The cells: the initiation-set reading (first: ``pos0-everything-clearned``; loca
 ``primitives``) and whether stores keep negatives (``kn0``, ``kn1``); optional suffixes
 ``-top`` (a joining option's policy starts as the agent's own, ``--policy-start top-level``)
 ``-agN`` (``Q(s, o)`` starts as the agent's state value plus N, ``--value-start agent``),
-``-oaX`` (``--option-alpha X``) and ``-CX`` (``--completion-reward X``).
+``-oaX`` (``--option-alpha X``), ``-CX`` (``--completion-reward X``), ``-gN`` (``--gestation
+N``) and ``-ctX`` (``--convergence-threshold X``).
 """
 
 from __future__ import annotations
@@ -71,8 +72,13 @@ def cells(names: list[str]) -> dict[str, list[str]]:
                 out[name] += ["--option-alpha", part[2:]]
             elif part.startswith("C"):  # e.g. C0: completion reward 0
                 out[name] += ["--completion-reward", part[1:]]
+            elif part.startswith("ct"):  # e.g. ct0.5: convergence threshold 0.5
+                out[name] += ["--convergence-threshold", part[2:]]
+            elif part.startswith("g") and part[1:].isdigit():  # e.g. g3: gestation 3 episodes
+                out[name] += ["--gestation", part[1:]]
             else:
-                raise ValueError(f"cell {name!r}: unknown part {part!r} (top, agN, oaX, CX)")
+                raise ValueError(f"cell {name!r}: unknown part {part!r} "
+                                 f"(top, agN, oaX, CX, gN, ctX)")  # fmt: skip
     return out
 
 

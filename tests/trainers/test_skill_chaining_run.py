@@ -186,3 +186,41 @@ def test_initiation_reading_reaches_the_classifiers():
     assert classifier.bias.eq(2.5).all()
     default = SkillChainingRunAgent(TrainConfig(runs=1, **BOX)).bank.classifier
     assert default.config["initial_bias"] == 0.0 and default.config["centered"] is False
+
+
+def test_gestation_and_convergence_reach_the_discovery_rules():
+    from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+
+    paper = SkillChainingRunAgent(TrainConfig(runs=1, **BOX)).discovery
+    assert (paper.gestation, paper.convergence.threshold) == (10, 0.15)
+    config = TrainConfig(runs=1, gestation=3, convergence_threshold=0.5, **BOX)
+    discovery = SkillChainingRunAgent(config).discovery
+    assert (discovery.gestation, discovery.convergence.threshold) == (3, 0.5)
+    # a flat run never reads them, so it stays valid whatever they are
+    flat = TrainConfig(runs=1).resolved()
+    assert flat.mismatches(TrainConfig(runs=1, gestation=3).resolved()) == []
+
+
+def test_shorter_gestation_joins_options_sooner():
+    """Two agents alike but for gestation: each option joins ``gestation`` episodes after it is
+    created, so with 1 episode the first option is executable long before it is with 10."""
+    joined = {}
+    for g in (1, 10):
+        trainer = PopulationTrainer(TrainConfig(runs=2, episodes=6, seed=3, gestation=g, **BOX))
+        trainer.train()
+        joined[g] = [e for e in trainer.agent.discovery.log if e.kind == "joined"]
+        created = {(e.agent, e.slot): e.episode for e in trainer.agent.discovery.log
+                   if e.kind == "created"}  # fmt: skip
+        assert all(e.episode - created[(e.agent, e.slot)] == g for e in joined[g])
+    assert joined[1] and not joined[10]
+
+
+@pytest.mark.parametrize("flag, value, message", [
+    ("--gestation", "-1", "gestation must be in [0, 10^6]"),
+    ("--convergence-threshold", "0", "convergence_threshold must be finite and > 0"),
+])  # fmt: skip
+def test_cli_refuses_bad_gestation_and_convergence(tmp_path, capsys, flag, value, message):
+    with pytest.raises(SystemExit) as exit_:
+        main(["train", "--agent", "skill-chaining", "--runs", "1", "--episodes", "1",
+              flag, value, "--out", str(tmp_path / "run")])  # fmt: skip
+    assert exit_.value.code == 2 and message in capsys.readouterr().err
