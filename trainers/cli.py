@@ -239,7 +239,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--gestation",
         type=int,
         default=None,
-        help="episodes a new option gestates before it can be chosen (default: the paper's 10)",
+        help="episodes a new option gestates before it can be chosen (default 2; the paper: 10)",
     )
     train.add_argument(
         "--convergence-threshold",

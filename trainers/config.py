@@ -38,7 +38,7 @@ __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "
 # saved config without one of them ran with this value (whatever today's default is).
 LEGACY_FIELDS = {"failure_bootstrap": "decision", "keep_negatives": False, "policy_start": "zero",
                  "value_start": "max-sample", "value_bonus": 0.0, "option_alpha": 0.0005,
-                 "completion_reward": 10_000.0}
+                 "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
@@ -234,7 +234,9 @@ class TrainConfig:
             options keep the step size of the run that discovered them.
         completion_reward: ``C``, added to an option's reward when its target fires (the paper
             does not give it; 10,000 is the task's goal reward).
-        gestation: episodes a new option gestates before it joins the repertoire (paper: 10).
+        gestation: episodes a new option gestates before it joins the repertoire (paper: 10;
+            default 2: with a policy copied from the agent, gestation only delays the chain,
+            and 2 beat flat on episodes 26-50 where 10 did not; ``results/chain-growth/``).
         convergence_threshold: an initiation set is learned (and becomes a target event) when
             its classifier's weights moved on average less than this per episode, twice in a
             row (paper: 0.15).
@@ -272,7 +274,7 @@ class TrainConfig:
     completion_reward: float = 10_000.0
     value_start: str = "agent"
     value_bonus: float = 0.0
-    gestation: int = 10
+    gestation: int = 2
     convergence_threshold: float = 0.15
 
     @property

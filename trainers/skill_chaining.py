@@ -2,12 +2,13 @@
 
 ``skillchain train --agent skill-chaining --runs 20 --episodes 250 --out DIR`` trains
 :class:`~skillchain_torch.agents.SkillChainingAgent` agents with the paper's values (section
-5.1): the top level as the flat agent (Sarsa, order 4 / alpha 0.001 on simple maps, order 5 /
-0.0005 on hard maps, epsilon 0.01, gamma 1); options with an order-3 Fourier Q-head
-(alpha_o = 0.0005, epsilon 0.01), logistic initiation sets (2nd-order features, eta = 0.1,
-100 sweeps, the two classes weighted equally), gestation 10 episodes, convergence 0.15
-twice, distance 0.1, branching 3, and ``config.slots`` option slots per agent. The goal is
-the only initial target event.
+5.1) where the config keeps them: the top level as the flat agent (Sarsa, order 4 / alpha
+0.001 on simple maps, order 5 / 0.0005 on hard maps, epsilon 0.01, gamma 1); options with an
+order-3 Fourier Q-head (epsilon 0.01; ``config.option_alpha``), logistic initiation sets
+(2nd-order features, eta = 0.1, 100 sweeps, the two classes weighted equally),
+``config.gestation`` episodes of gestation (default 2; the paper: 10),
+``config.convergence_threshold`` (0.15) twice, distance 0.1, branching 3, and
+``config.slots`` option slots per agent. The goal is the only initial target event.
 """
 
 from __future__ import annotations

@@ -191,8 +191,8 @@ def test_initiation_reading_reaches_the_classifiers():
 def test_gestation_and_convergence_reach_the_discovery_rules():
     from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
 
-    paper = SkillChainingRunAgent(TrainConfig(runs=1, **BOX)).discovery
-    assert (paper.gestation, paper.convergence.threshold) == (10, 0.15)
+    default = SkillChainingRunAgent(TrainConfig(runs=1, **BOX)).discovery
+    assert (default.gestation, default.convergence.threshold) == (2, 0.15)
     config = TrainConfig(runs=1, gestation=3, convergence_threshold=0.5, **BOX)
     discovery = SkillChainingRunAgent(config).discovery
     assert (discovery.gestation, discovery.convergence.threshold) == (3, 0.5)
