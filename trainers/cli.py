@@ -266,6 +266,28 @@ def build_parser() -> argparse.ArgumentParser:
         "rounded in torch's order: bit for bit the runs of versions before them)",
     )
     train.add_argument("--quiet", action="store_true", help="no progress bar")
+    train.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="train the agents on N Ray workers in blocks, merged into --out bit for bit "
+        "(default 1: this process; needs pip install skillchain_torch[ray])",
+    )
+    train.add_argument(
+        "--block-size",
+        type=int,
+        default=None,
+        metavar="B",
+        help="with --workers: agents per block, handed to workers as they free up "
+        "(default: about 4 blocks per worker)",
+    )
+    train.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDR",
+        help="with --workers: the Ray cluster to use (default: RAY_ADDRESS, else a local Ray "
+        "of N CPUs)",
+    )
     summary = sub.add_parser("summarize", help="print the returns table of a finished run")
     summary.add_argument("dir", type=Path, help="run directory")
     reproduce = sub.add_parser(
@@ -522,6 +544,7 @@ def _train(parser, args) -> int:
                      f"of this machine), got {args.threads}")  # fmt: skip
     native = False if args.torch_only else None
     created = None
+    sharded = _check_sharding(parser, args)
     if args.resume is not None:
         out = args.resume
         given = [_flag(n) for n in CONFIG_OPTIONS if getattr(args, n) is not None]
@@ -545,6 +568,8 @@ def _train(parser, args) -> int:
                 parser.error(_flag_message(err, ["device"]))
             hint = " (resume with --device cpu)" if "device" in getattr(err, "fields", ()) else ""
             parser.error(f"{path}: {err}{hint}")
+        if sharded or (out / "sharding.json").is_file():
+            return _train_sharded(parser, args, config, out, native, resume=True)
         checkpoint = latest_checkpoint(out)
         if checkpoint is None:
             parser.error(f"--resume {out}: no checkpoint under {out / 'checkpoints'}")
@@ -573,7 +598,78 @@ def _train(parser, args) -> int:
         except OSError as err:
             _remove_created(created)
             _fail(parser, f"--out {out}: cannot write there ({_write_error(err)})")
+        if sharded:
+            return _train_sharded(parser, args, config, out, native, resume=False)
     return _run(trainer, out, quiet=args.quiet, parser=parser, created=created)
+
+
+def _check_sharding(parser, args) -> bool:
+    """Check --workers, --block-size and --ray-address; True for a sharded run (N > 1)."""
+    if args.workers is not None and args.workers < 1:
+        parser.error(f"--workers must be >= 1, got {args.workers}")
+    if args.block_size is not None and args.block_size < 1:
+        parser.error(f"--block-size must be >= 1, got {args.block_size}")
+    sharded = (args.workers or 1) > 1
+    resumed = args.resume is not None and (args.resume / "sharding.json").is_file()
+    if not (sharded or resumed):
+        for flag, value in (("--block-size", args.block_size),
+                            ("--ray-address", args.ray_address)):
+            if value is not None:
+                parser.error(f"{flag} needs --workers N with N > 1")
+    if sharded and args.resume is not None and not resumed:
+        parser.error(f"--resume {args.resume} is a one-process run and resumes as one; do not "
+                     f"pass --workers")
+    if args.resume is not None and args.block_size is not None:
+        parser.error("--resume keeps the run's blocks; do not pass --block-size")
+    if sharded or resumed:
+        from .distributed import require_ray
+
+        try:
+            require_ray("--workers" if sharded else f"--resume {args.resume} (a sharded run)")
+        except ImportError as err:
+            parser.error(str(err))
+    return sharded
+
+
+def _train_sharded(parser, args, config, out: Path, native, resume: bool) -> int:
+    """Train ``config``'s agents in blocks on Ray workers and merge them into ``out``."""
+    import time
+
+    from .distributed import (
+        ShardedRun,
+        block_spans,
+        default_block_size,
+        record_driver_wall,
+        run_sharded,
+    )
+
+    if resume:
+        run = ShardedRun.load(out, config)
+        saved = json.loads((out / "sharding.json").read_text())["workers"]
+        workers = args.workers or saved
+    else:
+        workers = args.workers
+        size = args.block_size or default_block_size(config.runs, workers)
+        if size > config.runs:
+            parser.error(f"--block-size must be at most --runs ({config.runs}), got {size}")
+        run = ShardedRun(config, out, block_spans(config.runs, size))
+        run.save(workers)
+    clock = time.perf_counter()
+    try:
+        [info] = run_sharded([run], workers, address=args.ray_address, threads=args.threads,
+                             native=native, quiet=args.quiet)
+    except KeyboardInterrupt:
+        record_driver_wall(out, time.perf_counter() - clock)
+        print(f"\ninterrupted; continue with: skillchain train --resume {out}", file=sys.stderr)
+        return 130
+    except RuntimeError as err:
+        record_driver_wall(out, time.perf_counter() - clock)
+        _fail(parser, _one_line(err) + f"; once fixed, continue with: skillchain train "
+                                       f"--resume {out}")
+    if not args.quiet:
+        print(f"done: {info['agent_steps']:,} agent steps in {info['wall_time_s']:.1f} s on "
+              f"{workers} workers ({info['blocks']} blocks); outputs in {out}", file=sys.stderr)
+    return 0
 
 
 def _run(trainer, out: Path, quiet: bool, parser=None, created: Path | None = None) -> int:

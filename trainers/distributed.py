@@ -1,0 +1,372 @@
+"""One run's agents sharded across Ray workers: ``skillchain train ... --workers N``.
+
+By the seed contract the agents ``[a, b)`` of a run seeded ``S`` are the population run with
+``runs = b - a`` and ``seed = S + a``, bit for bit. So a run of P agents is cut into blocks,
+each block trains as an ordinary population run in ``RUN_DIR/blocks/<a>-<b>/`` (its own
+``config.json`` and checkpoints), and the driver then merges the blocks into exactly the files a
+one-process run writes: ``returns.npy``, ``lengths.npy`` (rows in agent order), the TensorBoard
+population scalars over all agents, ``learning_curve.png``, ``run_info.json``, and for skill
+chaining ``options.pt``, ``n_options.npy`` and ``option_tree.json``. (The checkpoints stay in
+the blocks; ``option_trajectory.png``, a replay of the whole population, is not drawn.)
+
+Why Ray core tasks, not Ray Tune: Tune runs trials of a search, each a configuration with its
+own stopping rule; a block is a slice of one population run whose rows must be merged bit for
+bit, which is exactly one remote function call. Load balancing is dynamic: one task per block
+and at most ``workers`` in flight (``ray.wait``), so whichever worker frees up takes the next
+block, and a run no longer waits on P/N agents that happen to be slow together.
+
+Failures: a task whose worker dies is retried by Ray (``max_retries``), and a block always
+resumes from its newest checkpoint, so the retry continues where the dead worker's last
+checkpoint was (bit for bit, the checkpoint contract). A finished block writes ``block.json``
+last; ``--resume RUN_DIR`` skips those and resumes the others. Nothing is counted twice: the
+progress bar holds each block's absolute counts, not increments.
+
+Example (two workers on this machine, blocks of 2 agents):
+    skillchain train --agent flat --runs 8 --episodes 100 --out runs/flat --workers 2 \\
+        --block-size 2
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .config import TrainConfig
+
+__all__ = ["block_spans", "default_block_size", "block_config", "run_block", "require_ray",
+           "ShardedRun", "run_sharded", "merge_blocks", "RAY_MISSING"]
+
+RAY_MISSING = "needs Ray, which is not installed: pip install skillchain_torch[ray]"
+SHARDING = "sharding.json"  # RUN_DIR's record of the blocks (read by --resume)
+DONE = "block.json"  # written last by a finished block
+
+
+def default_block_size(runs: int, workers: int) -> int:
+    """About four blocks per worker: small enough that no worker idles long at the end, large
+    enough that the agents of a block share the batched steps.
+
+    Example:
+        >>> default_block_size(100, 2), default_block_size(10, 2), default_block_size(3, 4)
+        (12, 1, 1)
+    """
+    return max(1, runs // (4 * workers))
+
+
+def block_spans(runs: int, block_size: int) -> list[tuple[int, int]]:
+    """The agent ranges ``[a, b)`` of blocks of ``block_size`` agents (the last may be short).
+
+    Example:
+        >>> block_spans(5, 2)
+        [(0, 2), (2, 4), (4, 5)]
+    """
+    return [(a, min(a + block_size, runs)) for a in range(0, runs, block_size)]
+
+
+def block_config(config: TrainConfig, a: int, b: int, block_dir: Path) -> TrainConfig:
+    """The population run of agents ``[a, b)`` of ``config`` (the seed contract: ``seed + a``).
+
+    A given-options run with ``--options-agent each`` gives agent p saved agent p mod N's
+    options; a block's agent q is agent a + q, so the block gets a file of exactly those.
+    """
+    block = dataclasses.replace(config, runs=b - a, seed=config.seed + a)
+    if config.agent == "given-options" and config.options_agent is None:
+        from skillchain_torch.options import OptionBank
+
+        path = block_dir / "given_options.pt"
+        if not path.is_file():
+            saved = OptionBank.load(config.options)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            saved.select_agents([p % saved.population for p in range(a, b)]).save(path)
+        block = dataclasses.replace(block, options=str(path))
+    return block
+
+
+def require_ray(what: str = "--workers"):
+    """The ``ray`` module, or ``ImportError`` with one line naming ``what`` and the extra."""
+    try:
+        import ray
+    except ImportError:
+        raise ImportError(f"{what} {RAY_MISSING}") from None
+    return ray
+
+
+class _Progress:
+    """Per-block ``(episodes, agent steps)``, absolute so a retried block is never counted
+    twice; a Ray actor that the blocks report to and the driver reads."""
+
+    def __init__(self):
+        self.blocks: dict[str, tuple[int, int]] = {}
+
+    def report(self, key: str, episodes: int, steps: int) -> None:
+        self.blocks[key] = (episodes, steps)
+
+    def totals(self) -> tuple[int, int]:
+        return (sum(e for e, _ in self.blocks.values()), sum(s for _, s in self.blocks.values()))
+
+
+class _Reporter:
+    """Trainer hook sending a block's counts to the progress actor, at most once a second."""
+
+    def __init__(self, actor, key: str, interval: float = 1.0):
+        self.actor, self.key, self.interval = actor, key, interval
+        self._last = -float("inf")
+
+    def register(self, trainer) -> None:
+        trainer.register_op("pre_train", self.send, name="ray_progress")
+        trainer.register_op("post_episodes", lambda t, batch: self.send(t), name="ray_progress")
+        trainer.register_op("post_train", lambda t: self.send(t, force=True), name="ray_progress")
+
+    def send(self, trainer, force: bool = False) -> None:
+        now = time.monotonic()
+        if force or now - self._last >= self.interval:
+            self._last = now
+            self.actor.report.remote(self.key, int(trainer.episodes_done.sum()),
+                                     int(trainer.agent_steps))
+
+
+def run_block(config: TrainConfig, block_dir: str | Path, threads: int = 1,
+              native: bool | None = None, progress=None, crash_once: str | None = None) -> dict:
+    """Train one block in ``block_dir`` (resuming from its newest checkpoint) and write its
+    arrays; returns its ``block.json`` record. A finished block is not run again.
+
+    ``crash_once``: a test hook, a marker file; when it does not exist yet, the worker creates
+    it and dies right after the block's first checkpoint (as a killed worker would).
+    """
+    from .checkpoint import latest_checkpoint, resume_checkpoint
+    from .population import PopulationTrainer
+
+    block_dir = Path(block_dir)
+    if (block_dir / DONE).is_file():
+        return json.loads((block_dir / DONE).read_text())
+    trainer = PopulationTrainer(config, out_dir=block_dir, num_threads=threads, native=native)
+    discovery = None
+    if getattr(trainer.agent, "discovery", None) is not None:
+        from .discovery_log import DiscoveryLog
+
+        discovery = DiscoveryLog()
+        discovery.register(trainer)
+    if latest_checkpoint(block_dir) is not None:
+        resume_checkpoint(block_dir, trainer)
+    else:
+        block_dir.mkdir(parents=True, exist_ok=True)
+        config.save_json(block_dir / "config.json")
+    if progress is not None:
+        _Reporter(progress, block_dir.name).register(trainer)
+    if crash_once is not None and not Path(crash_once).exists():
+        def die(trainer, path):
+            Path(crash_once).touch()
+            os._exit(1)  # no cleanup, as a killed process
+
+        trainer.register_op("post_checkpoint", die, name="crash_once")
+    trainer.train()
+    np.save(block_dir / "returns.npy", trainer.returns)
+    np.save(block_dir / "lengths.npy", trainer.lengths)
+    if discovery is not None:
+        from .discovery_log import option_tree
+
+        trainer.agent.bank.save(block_dir / "options.pt")
+        np.save(block_dir / "n_options.npy", discovery.n_options)
+        (block_dir / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent)) + "\n")
+    record = {"agents": config.runs, "seed": config.seed, "agent_steps": int(trainer.agent_steps),
+              "wall_time_s": trainer.elapsed,
+              "compiled_agent": bool(getattr(trainer.agent, "native", False))}
+    tmp = block_dir / (DONE + ".tmp")
+    tmp.write_text(json.dumps(record, indent=1) + "\n")
+    os.replace(tmp, block_dir / DONE)  # the block counts as done only once all is written
+    return record
+
+
+@dataclasses.dataclass
+class ShardedRun:
+    """A run to shard: its config, its directory and its blocks (``[a, b)`` agent ranges)."""
+
+    config: TrainConfig
+    out: Path
+    spans: list[tuple[int, int]]
+
+    def block_dir(self, span: tuple[int, int]) -> Path:
+        return self.out / "blocks" / f"{span[0]}-{span[1]}"
+
+    def save(self, workers: int) -> None:
+        record = {"workers": workers, "blocks": [list(s) for s in self.spans]}
+        (self.out / SHARDING).write_text(json.dumps(record) + "\n")
+
+    @classmethod
+    def load(cls, out: Path, config: TrainConfig) -> ShardedRun:
+        record = json.loads((Path(out) / SHARDING).read_text())
+        return cls(config, Path(out), [tuple(s) for s in record["blocks"]])
+
+
+def _init_ray(ray, workers: int, address: str | None) -> None:
+    """A local Ray of ``workers`` CPUs, or the cluster at ``address`` (``RAY_ADDRESS`` too, as
+    Ray reads it); reuses a Ray already started in this process (the tests' fixture)."""
+    if ray.is_initialized():
+        return
+    kwargs = {"log_to_driver": False, "include_dashboard": False,  # one bar, no worker logs
+              "configure_logging": False}
+    if address is not None or os.environ.get("RAY_ADDRESS"):
+        ray.init(address=address, **kwargs)
+    else:
+        ray.init(num_cpus=workers, **kwargs)
+
+
+def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None,
+                threads: int = 1, native: bool | None = None, quiet: bool = False,
+                on_merged=None, crash_once: str | None = None) -> list[dict]:
+    """Train the blocks of ``runs`` on Ray, ``workers`` at a time, and merge each run once its
+    blocks are done (``on_merged(run, info)`` after each); returns each run's ``run_info``.
+
+    Blocks of every run share the one pool, so a sweep's cells fill the workers together.
+    A block that fails (a diverged learner) raises ``RuntimeError`` naming it.
+    """
+    from tqdm.auto import tqdm
+
+    ray = require_ray()
+    _init_ray(ray, workers, address)
+    task = ray.remote(num_cpus=1, max_retries=3)(run_block)
+    progress = ray.remote(num_cpus=0)(_Progress).remote()
+    clock = time.perf_counter()
+    todo = [(i, span) for i, run in enumerate(runs) for span in run.spans]
+    left = {i: len(run.spans) for i, run in enumerate(runs)}
+    records: dict[int, dict] = {i: {} for i in range(len(runs))}
+    total = sum(r.config.runs * r.config.episodes for r in runs)
+    agents = sum(r.config.runs for r in runs)
+    bar = tqdm(total=total, unit="ep", desc=f"{len(todo)} blocks on {workers} workers",
+               dynamic_ncols=True, disable=quiet)
+    agents_done = 0
+    shown = (0, 0)
+    in_flight: dict = {}
+    infos = [None] * len(runs)
+    try:
+        while todo or in_flight:
+            while todo and len(in_flight) < workers:
+                i, span = todo.pop(0)
+                run = runs[i]
+                block_dir = run.block_dir(span)
+                cfg = block_config(run.config, *span, block_dir)
+                ref = task.remote(cfg, str(block_dir), threads, native, progress, crash_once)
+                in_flight[ref] = (i, span)
+            done, _ = ray.wait(list(in_flight), num_returns=1, timeout=0.5)
+            for ref in done:
+                i, span = in_flight.pop(ref)
+                try:
+                    records[i][span] = ray.get(ref)
+                except Exception as err:  # a diverged or broken block: stop the run
+                    for other in in_flight:
+                        ray.cancel(other, force=True)
+                    reason = " ".join(str(getattr(err, "cause", None) or err).split())[:400]
+                    raise RuntimeError(f"{runs[i].out}: block {span[0]}-{span[1]} failed "
+                                       f"({reason})") from None  # fmt: skip
+                agents_done += span[1] - span[0]
+                left[i] -= 1
+                if left[i] == 0:
+                    infos[i] = merge_blocks(runs[i], records[i], workers,
+                                            time.perf_counter() - clock)
+                    if on_merged is not None:
+                        on_merged(runs[i], infos[i])
+            episodes, steps = ray.get(progress.totals.remote())
+            if (episodes, agents_done) != shown:  # redraw on news only (a log file stays short)
+                shown = (episodes, agents_done)
+                bar.n = episodes
+                elapsed = time.perf_counter() - clock
+                bar.set_postfix(agents=f"{agents_done}/{agents}",
+                                steps_s=f"{steps / elapsed if elapsed else 0:,.0f}", refresh=False)
+                bar.refresh()
+    finally:
+        bar.close()
+    return infos
+
+
+def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float) -> dict:
+    """Write ``run.out``'s one-process outputs from its finished blocks; returns run_info."""
+    import platform
+
+    import torch
+
+    from .cli import source_commit
+    from .plots import save_learning_curve
+
+    cfg, out = run.config, run.out
+    dirs = [run.block_dir(s) for s in run.spans]
+    returns = np.concatenate([np.load(d / "returns.npy") for d in dirs])
+    lengths = np.concatenate([np.load(d / "lengths.npy") for d in dirs])
+    np.save(out / "lengths.npy", lengths)
+    cfg.save_json(out / "config.json")
+    n_options = None
+    if (dirs[0] / "options.pt").is_file():
+        n_options = _merge_options(run, dirs)
+    _write_tensorboard(cfg, out, returns, lengths, n_options)
+    save_learning_curve(returns, out / "learning_curve.png",
+                        title=f"{cfg.agent} on {cfg.map} ({cfg.runs} runs)")
+    steps = sum(r["agent_steps"] for r in records.values())
+    previous = _previous_wall(out)
+    info = {
+        "wall_time_s": previous + wall,
+        "agent_steps": steps,
+        "agent_steps_per_second": steps / (previous + wall) if previous + wall > 0 else 0.0,
+        "block_wall_time_s": sum(r["wall_time_s"] for r in records.values()),
+        "workers": workers,
+        "block_size": max(b - a for a, b in run.spans),
+        "blocks": len(run.spans),
+        "torch": torch.__version__,
+        "threads": 1,
+        "compiled_agent": all(r.get("compiled_agent", False) for r in records.values()),
+        "machine": platform.processor() or platform.machine(),
+        "commit": source_commit(),
+    }
+    (out / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")
+    np.save(out / "returns.npy", returns)  # last: a sweep takes returns.npy as "complete"
+    return info
+
+
+def _previous_wall(out: Path) -> float:
+    """Driver seconds of earlier invocations of a resumed run (saved in sharding.json)."""
+    try:
+        return float(json.loads((out / SHARDING).read_text()).get("driver_wall_time_s", 0.0))
+    except (OSError, ValueError):
+        return 0.0
+
+
+def record_driver_wall(out: Path, seconds: float) -> None:
+    """Add ``seconds`` to the driver time saved in ``out/sharding.json`` (for --resume)."""
+    path = Path(out) / SHARDING
+    record = json.loads(path.read_text())
+    record["driver_wall_time_s"] = record.get("driver_wall_time_s", 0.0) + seconds
+    path.write_text(json.dumps(record) + "\n")
+
+
+def _merge_options(run: ShardedRun, dirs: list[Path]) -> np.ndarray:
+    """``options.pt`` (one bank, agents in order), ``n_options.npy`` and ``option_tree.json``."""
+    from skillchain_torch.options import OptionBank
+
+    OptionBank.concat([OptionBank.load(d / "options.pt") for d in dirs]).save(
+        run.out / "options.pt")
+    n_options = np.concatenate([np.load(d / "n_options.npy") for d in dirs])
+    np.save(run.out / "n_options.npy", n_options)
+    trees = [json.loads((d / "option_tree.json").read_text()) for d in dirs]
+    agents = [{**agent, "agent": a + agent["agent"]}
+              for (a, _), tree in zip(run.spans, trees) for agent in tree["agents"]]
+    tree = {**trees[0], "agents": agents}
+    (run.out / "option_tree.json").write_text(json.dumps(tree, indent=1) + "\n")
+    return n_options
+
+
+def _write_tensorboard(cfg: TrainConfig, out: Path, returns, lengths, n_options) -> None:
+    """The population scalars of a one-process run, from the merged arrays."""
+    import shutil
+
+    from torchrl.record.loggers import TensorboardLogger
+
+    from .logging import experiment_name, log_population_arrays
+
+    shutil.rmtree(out / "tb", ignore_errors=True)  # a merge redone on --resume: no duplicates
+    logger = TensorboardLogger(experiment_name(cfg), log_dir=str(out / "tb"))
+    try:
+        log_population_arrays(logger, cfg, returns, lengths, n_options)
+    finally:
+        logger.experiment.close()
