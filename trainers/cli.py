@@ -325,8 +325,27 @@ def build_parser() -> argparse.ArgumentParser:
     )
     verify.add_argument("dir", type=Path, help="run directory")
     verify.add_argument("--agents", type=int, nargs="+", required=True, help="agent indices")
+    sweep = sub.add_parser(
+        "sweep",
+        help="run a grid of configurations on Ray and compare them",
+        description="Run every cell of SPEC's grid (agents x maps x TrainConfig fields x "
+        "seeds) as a run directory OUT/<cell>/, the cells' blocks of agents sharing one Ray "
+        "pool; complete cells are skipped on a re-run. Then write OUT/summary.md (window "
+        "means with 95%% intervals) and OUT/summary.png. Needs pip install "
+        "skillchain_torch[ray].",
+    )
+    sweep.add_argument("spec", type=Path, help="sweep spec, TOML (or YAML with PyYAML)")
+    sweep.add_argument("--out", type=Path, default=None,
+                       help="output directory (default: the spec's out, else its name)")
+    sweep.add_argument("--workers", type=int, default=None,
+                       help="Ray workers (default: the spec's workers, else every CPU)")
+    sweep.add_argument("--block-size", type=int, default=None, metavar="B",
+                       help="agents per block (default: about 4 blocks per worker per cell)")
+    sweep.add_argument("--ray-address", default=None, metavar="ADDR",
+                       help="the Ray cluster to use (default: RAY_ADDRESS, else a local Ray)")
+    sweep.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.commands = {"train": train, "summarize": summary, "reproduce": reproduce,
-                       "verify": verify}
+                       "verify": verify, "sweep": sweep}
     return parser
 
 
@@ -367,6 +386,8 @@ def main(argv: list[str] | None = None) -> int:
         return _reproduce(command, args)
     if args.command == "verify":
         return _verify(command, args)
+    if args.command == "sweep":
+        return _sweep(command, args)
     return _train(command, args)
 
 
@@ -389,6 +410,35 @@ def _reproduce(parser, args) -> int:
         print("\ninterrupted; continue with the same command", file=sys.stderr)
         return 130
     print(f"report: {path}")
+    return 0
+
+
+def _sweep(parser, args) -> int:
+    from .distributed import require_ray
+    from .sweep import run_sweep
+
+    for flag, value in (("--workers", args.workers), ("--block-size", args.block_size)):
+        if value is not None and value < 1:
+            parser.error(f"{flag} must be >= 1, got {value}")
+    try:
+        require_ray("skillchain sweep")
+    except ImportError as err:
+        parser.error(str(err))
+    try:
+        result = run_sweep(args.spec, out=args.out, workers=args.workers,
+                           block_size=args.block_size, address=args.ray_address,
+                           quiet=args.quiet)  # fmt: skip
+    except ValueError as err:
+        parser.error(_one_line(err))
+    except RuntimeError as err:  # a block failed (a diverged learner)
+        _fail(parser, _one_line(err) + "; fix it and run the same command again")
+    except KeyboardInterrupt:
+        print("\ninterrupted; continue with the same command", file=sys.stderr)
+        return 130
+    if not args.quiet:
+        print(result["table"])
+    print(f"{len(result['ran'])} cells run, {len(result['skipped'])} skipped (complete); "
+          f"summary: {result['summary']}")
     return 0
 
 

@@ -238,7 +238,7 @@ def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None
     agents = sum(r.config.runs for r in runs)
     bar = tqdm(total=total, unit="ep", desc=f"{len(todo)} blocks on {workers} workers",
                dynamic_ncols=True, disable=quiet)
-    agents_done = 0
+    agents_done = finished = 0
     shown = (0, 0)
     in_flight: dict = {}
     infos = [None] * len(runs)
@@ -263,6 +263,7 @@ def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None
                     raise RuntimeError(f"{runs[i].out}: block {span[0]}-{span[1]} failed "
                                        f"({reason})") from None  # fmt: skip
                 agents_done += span[1] - span[0]
+                finished += (span[1] - span[0]) * runs[i].config.episodes
                 left[i] -= 1
                 if left[i] == 0:
                     infos[i] = merge_blocks(runs[i], records[i], workers,
@@ -270,6 +271,7 @@ def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None
                     if on_merged is not None:
                         on_merged(runs[i], infos[i])
             episodes, steps = ray.get(progress.totals.remote())
+            episodes = max(episodes, finished)  # a block's last report may still be on its way
             if (episodes, agents_done) != shown:  # redraw on news only (a log file stays short)
                 shown = (episodes, agents_done)
                 bar.n = episodes
