@@ -6,8 +6,9 @@ each block trains as an ordinary population run in ``RUN_DIR/blocks/<a>-<b>/`` (
 ``config.json`` and checkpoints), and the driver then merges the blocks into exactly the files a
 one-process run writes: ``returns.npy``, ``lengths.npy`` (rows in agent order), the TensorBoard
 population scalars over all agents, ``learning_curve.png``, ``run_info.json``, and for skill
-chaining ``options.pt``, ``n_options.npy`` and ``option_tree.json``. (The checkpoints stay in
-the blocks; ``option_trajectory.png``, a replay of the whole population, is not drawn.)
+chaining ``options.pt``, ``n_options.npy``, ``option_tree.json`` and
+``option_trajectory.png`` (its candidate agents replayed on the workers from the blocks' last
+checkpoints, which stay in the blocks).
 
 Why Ray core tasks, not Ray Tune: Tune runs trials of a search, each a configuration with its
 own stopping rule; a block is a slice of one population run whose rows must be merged bit for
@@ -202,6 +203,21 @@ class ShardedRun:
         return cls(config, Path(out), [tuple(s) for s in record["blocks"]])
 
 
+def block_trajectory(config: TrainConfig, block_dir: str | Path, agent: int,
+                     offset: int) -> dict:
+    """The Figure 4b candidates of agent ``agent`` of a finished block (its greedy and
+    epsilon-greedy episodes, :func:`~.option_trajectory.best_greedy_trajectory`), rebuilt from
+    the block's last checkpoint; ``agent`` in the result is the run's index (+ ``offset``)."""
+    from .checkpoint import resume_checkpoint
+    from .option_trajectory import best_greedy_trajectory
+    from .population import PopulationTrainer
+
+    trainer = PopulationTrainer(config, out_dir=block_dir)
+    resume_checkpoint(block_dir, trainer)
+    run = best_greedy_trajectory(trainer.agent, config.map, agents=[agent])
+    return {**run, "agent": offset + agent}
+
+
 def _init_ray(ray, workers: int, address: str | None) -> None:
     """A local Ray of ``workers`` CPUs, or the cluster at ``address`` (``RAY_ADDRESS`` too, as
     Ray reads it); reuses a Ray already started in this process (the tests' fixture)."""
@@ -302,6 +318,7 @@ def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float) -> d
     n_options = None
     if (dirs[0] / "options.pt").is_file():
         n_options = _merge_options(run, dirs)
+        _option_trajectory(run, returns)
     _write_tensorboard(cfg, out, returns, lengths, n_options)
     save_learning_curve(returns, out / "learning_curve.png",
                         title=f"{cfg.agent} on {cfg.map} ({cfg.runs} runs)")
@@ -356,6 +373,29 @@ def _merge_options(run: ShardedRun, dirs: list[Path]) -> np.ndarray:
     tree = {**trees[0], "agents": agents}
     (run.out / "option_tree.json").write_text(json.dumps(tree, indent=1) + "\n")
     return n_options
+
+
+def _option_trajectory(run: ShardedRun, returns: np.ndarray) -> None:
+    """``option_trajectory.png`` as a one-process run draws it: the best greedy solution among
+    the eight agents holding the most options (ties: the best last return), each agent's
+    candidates replayed on a worker from its block's last checkpoint."""
+    import ray
+
+    from skillchain_torch.options import OptionBank
+
+    from .option_trajectory import save_option_trajectory, solution_rank
+
+    held = OptionBank.load(run.out / "options.pt").live().sum(-1).numpy()
+    last = np.nan_to_num(returns[:, -1], nan=-np.inf)
+    order = sorted(range(len(held)), key=lambda p: (-held[p], -last[p]))[:8]
+    task = ray.remote(num_cpus=1)(block_trajectory)
+    refs = []
+    for p in order:  # the one-process order, so ties go to the same agent
+        a, b = next(span for span in run.spans if span[0] <= p < span[1])
+        cfg = block_config(run.config, a, b, run.block_dir((a, b)))
+        refs.append(task.remote(cfg, str(run.block_dir((a, b))), p - a, a))
+    best = max(ray.get(refs), key=solution_rank)
+    save_option_trajectory(best, run.config.map, run.out / "option_trajectory.png")
 
 
 def _write_tensorboard(cfg: TrainConfig, out: Path, returns, lengths, n_options) -> None:

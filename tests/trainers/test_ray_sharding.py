@@ -27,7 +27,7 @@ def _same(out, reference) -> None:
     np.testing.assert_array_equal(np.load(out / "lengths.npy"), reference.lengths)
 
 
-@pytest.mark.parametrize("agent", ["flat", "skill-chaining"])
+@pytest.mark.parametrize("agent", ["flat", pytest.param("skill-chaining", marks=pytest.mark.slow)])
 def test_sharded_run_equals_one_process(ray_local, tmp_path, agent):
     """4 agents in blocks of 1 over 2 workers: the one-process arrays, bit for bit, and the
     one-process outputs around them."""
@@ -51,6 +51,11 @@ def test_sharded_run_equals_one_process(ray_local, tmp_path, agent):
         tree = json.loads((out / "option_tree.json").read_text())
         assert [a["agent"] for a in tree["agents"]] == [0, 1, 2, 3]
         assert np.load(out / "n_options.npy").shape == (4, 3)
+        # Figure 4b: the same episode drawn, its candidates replayed from the blocks
+        one = tmp_path / "one"
+        assert main(["train", *_flags(**fields), "--out", str(one), "--quiet"]) == 0
+        assert ((out / "option_trajectory.png").read_bytes()
+                == (one / "option_trajectory.png").read_bytes())
 
 
 def test_killed_worker_is_recovered(ray_local, tmp_path):
