@@ -10,8 +10,9 @@ the flat agent (default 100 x 250, seed 0), on pinball_simple_single:
 
 * ``1 process``: today's path;
 * ``2 workers static``: the agents cut into 2 contiguous shards (``--block-size ceil(P/2)``);
-* ``2 workers dynamic``: small blocks handed to the worker that frees up (the default
-  block size, about 4 blocks per worker).
+* ``2 workers dynamic, shrinking blocks``: the default, blocks handed to the worker that
+  frees up, each a ``2N``-th of the agents left (large first, single agents last);
+* ``2 workers dynamic, blocks of 1``: every agent its own block (``--block-size 1``).
 
 ``driver s`` is the run's own ``run_info.json`` wall time (for sharded runs from the first
 block submitted to the merge written), ``command s`` adds process and Ray start-up. Every
@@ -59,7 +60,9 @@ def compare(name: str, agent: str, runs: int, episodes: int, seed: int, workers:
     modes = [("1 process", []),
              (f"{workers} workers static",
               ["--workers", str(workers), "--block-size", str(math.ceil(runs / workers))]),
-             (f"{workers} workers dynamic", ["--workers", str(workers)])]
+             (f"{workers} workers dynamic, shrinking blocks", ["--workers", str(workers)]),
+             (f"{workers} workers dynamic, blocks of 1",
+              ["--workers", str(workers), "--block-size", "1"])]
     rows, reference = [], None
     for mode, extra in modes:
         out = root / f"{name}-{mode.replace(' ', '-')}"

@@ -279,7 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="B",
         help="with --workers: agents per block, handed to workers as they free up "
-        "(default: about 4 blocks per worker)",
+        "(default: blocks that shrink, each 1/(2N) of the agents left)",
     )
     train.add_argument(
         "--ray-address",
@@ -340,7 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--workers", type=int, default=None,
                        help="Ray workers (default: the spec's workers, else every CPU)")
     sweep.add_argument("--block-size", type=int, default=None, metavar="B",
-                       help="agents per block (default: about 4 blocks per worker per cell)")
+                       help="agents per block (default: blocks that shrink, as train --workers)")
     sweep.add_argument("--ray-address", default=None, metavar="ADDR",
                        help="the Ray cluster to use (default: RAY_ADDRESS, else a local Ray)")
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -671,6 +671,9 @@ def _check_sharding(parser, args) -> bool:
                      f"pass --workers")
     if args.resume is not None and args.block_size is not None:
         parser.error("--resume keeps the run's blocks; do not pass --block-size")
+    runs = args.runs if args.runs is not None else 1  # TrainConfig's default
+    if args.resume is None and args.block_size is not None and args.block_size > runs > 0:
+        parser.error(f"--block-size must be at most --runs ({runs}), got {args.block_size}")
     if sharded or resumed:
         from .distributed import require_ray
 
@@ -685,13 +688,7 @@ def _train_sharded(parser, args, config, out: Path, native, resume: bool) -> int
     """Train ``config``'s agents in blocks on Ray workers and merge them into ``out``."""
     import time
 
-    from .distributed import (
-        ShardedRun,
-        block_spans,
-        default_block_size,
-        record_driver_wall,
-        run_sharded,
-    )
+    from .distributed import ShardedRun, plan_blocks, record_driver_wall, run_sharded
 
     if resume:
         run = ShardedRun.load(out, config)
@@ -699,10 +696,7 @@ def _train_sharded(parser, args, config, out: Path, native, resume: bool) -> int
         workers = args.workers or saved
     else:
         workers = args.workers
-        size = args.block_size or default_block_size(config.runs, workers)
-        if size > config.runs:
-            parser.error(f"--block-size must be at most --runs ({config.runs}), got {size}")
-        run = ShardedRun(config, out, block_spans(config.runs, size))
+        run = ShardedRun(config, out, plan_blocks(config.runs, workers, args.block_size))
         run.save(workers)
     clock = time.perf_counter()
     try:

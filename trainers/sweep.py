@@ -207,7 +207,7 @@ def run_sweep(spec_path: str | Path, out: str | Path | None = None, workers: int
     """
     import os
 
-    from .distributed import ShardedRun, block_spans, default_block_size, run_sharded
+    from .distributed import ShardedRun, plan_blocks, run_sharded
 
     spec = load_spec(spec_path)
     cells = expand_grid(spec, str(spec_path))
@@ -232,8 +232,8 @@ def run_sweep(spec_path: str | Path, out: str | Path | None = None, workers: int
             todo.append(ShardedRun.load(cell_dir, config))
             continue
         config.save_json(saved)
-        per = min(int(size or default_block_size(config.runs, workers)), config.runs)
-        run = ShardedRun(config, cell_dir, block_spans(config.runs, per))
+        per = None if size is None else min(int(size), config.runs)
+        run = ShardedRun(config, cell_dir, plan_blocks(config.runs, workers, per))
         run.save(workers)
         todo.append(run)
     if not quiet and skipped:

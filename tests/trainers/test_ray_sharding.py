@@ -119,3 +119,14 @@ def test_sharding_flags_are_checked(tmp_path, capsys, argv, message):
         main(["train", "--runs", "4", "--out", str(tmp_path / "run"), *argv])
     assert info.value.code == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("runs", [1, 2, 7, 30, 100])
+@pytest.mark.parametrize("workers", [1, 2, 3, 16])
+def test_shrinking_blocks_cover_every_agent_once(runs, workers):
+    from skillchain_torch.trainers.distributed import guided_spans
+
+    spans = guided_spans(runs, workers)
+    assert [a for a, _ in spans] == [0] + [b for _, b in spans[:-1]] and spans[-1][1] == runs
+    sizes = [b - a for a, b in spans]
+    assert sizes == sorted(sizes, reverse=True) and sizes[-1] == 1
