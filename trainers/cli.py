@@ -4,6 +4,8 @@
         --seed 0 --out runs/flat
     skillchain train --resume runs/flat          # continue from the last checkpoint
     skillchain summarize runs/flat               # the table of returns per episode window
+    skillchain train ... --workers 2             # agents in blocks on Ray workers (distributed.py)
+    skillchain sweep grid.toml --out sweeps/x    # a grid of runs on Ray, then a summary (sweep.py)
 
 ``train`` writes ``DIR/config.json``, ``DIR/tb/`` (TensorBoard), ``DIR/checkpoints/``, and at
 the end ``DIR/returns.npy`` (float64 [runs, episodes]), ``DIR/lengths.npy`` (int64),

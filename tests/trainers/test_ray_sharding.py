@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -56,6 +57,27 @@ def test_sharded_run_equals_one_process(ray_local, tmp_path, agent):
         assert main(["train", *_flags(**fields), "--out", str(one), "--quiet"]) == 0
         assert ((out / "option_trajectory.png").read_bytes()
                 == (one / "option_trajectory.png").read_bytes())
+
+
+def test_sharded_given_options_each(ray_local, tmp_path):
+    """--options-agent each: agent p takes saved agent p mod N's options, in any block."""
+    import torch
+
+    from skillchain_torch.options import OptionBank
+
+    saved = OptionBank.load(Path(__file__).parents[2] / "benchmarks/data/skill_chaining_options.pt")
+    banks = [saved]
+    for kept in (4, 2):  # saved agents 1 and 2 hold fewer of the 9 options
+        bank = saved.select_agents([0])
+        bank.free(torch.arange(bank.slots)[None] >= kept)
+        banks.append(bank)
+    OptionBank.concat(banks).save(tmp_path / "options.pt")
+    fields = dict(agent="given-options", options=str(tmp_path / "options.pt"), runs=4,
+                  episodes=2, max_episode_steps=200, seed=5)
+    out = tmp_path / "go"
+    assert main(["train", *_flags(**fields), "--options-agent", "each", "--out", str(out),
+                 "--workers", "2", "--block-size", "1", "--quiet"]) == 0
+    _same(out, _one_process(**fields, options_agent=None))
 
 
 def test_killed_worker_is_recovered(ray_local, tmp_path):
