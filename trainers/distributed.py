@@ -250,18 +250,22 @@ def _init_ray(ray, workers: int, address: str | None) -> None:
 
 def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None,
                 threads: int = 1, native: bool | None = None, quiet: bool = False,
-                on_merged=None, crash_once: str | None = None) -> list[dict]:
+                crash_once: str | None = None) -> list[dict]:
     """Train the blocks of ``runs`` on Ray, ``workers`` at a time, and merge each run once its
-    blocks are done (``on_merged(run, info)`` after each); returns each run's ``run_info``.
+    blocks are done; returns each run's ``run_info``.
 
-    Blocks of every run share the one pool, so a sweep's cells fill the workers together.
-    A block that fails (a diverged learner) raises ``RuntimeError`` naming it.
+    Blocks of every run share the one pool, so a sweep's cells fill the workers together. A
+    run's merge is a Ray task too (writing TensorBoard's scalars of 100 x 250 episodes takes
+    a while), so the driver keeps handing out blocks meanwhile. A block that fails (a
+    diverged learner) raises ``RuntimeError`` naming it.
     """
     from tqdm.auto import tqdm
 
     ray = require_ray()
     _init_ray(ray, workers, address)
     task = ray.remote(num_cpus=1, max_retries=3)(run_block)
+    # No CPU of its own: it mostly writes files, and its replays are tasks that take one.
+    merge = ray.remote(num_cpus=0, max_retries=3)(merge_blocks)
     progress = ray.remote(num_cpus=0)(_Progress).remote()
     clock = time.perf_counter()
     todo = [(i, span) for i, run in enumerate(runs) for span in run.spans]
@@ -273,10 +277,11 @@ def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None
                dynamic_ncols=True, disable=quiet)
     agents_done = finished = 0
     shown = (0, 0)
-    in_flight: dict = {}
+    in_flight: dict = {}  # block tasks: (run, span)
+    merging: dict = {}  # merge tasks: run
     infos = [None] * len(runs)
     try:
-        while todo or in_flight:
+        while todo or in_flight or merging:
             while todo and len(in_flight) < workers:
                 i, span = todo.pop(0)
                 run = runs[i]
@@ -284,25 +289,21 @@ def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None
                 cfg = block_config(run.config, *span, block_dir)
                 ref = task.remote(cfg, str(block_dir), threads, native, progress, crash_once)
                 in_flight[ref] = (i, span)
-            done, _ = ray.wait(list(in_flight), num_returns=1, timeout=1.0)
+            done, _ = ray.wait([*in_flight, *merging], num_returns=1, timeout=1.0)
             for ref in done:
+                if ref in merging:
+                    i = merging.pop(ref)
+                    infos[i] = _result(ray, ref, [*in_flight, *merging], f"{runs[i].out}: merge")
+                    continue
                 i, span = in_flight.pop(ref)
-                try:
-                    records[i][span] = ray.get(ref)
-                except Exception as err:  # a diverged or broken block: stop the run
-                    for other in in_flight:
-                        ray.cancel(other, force=True)
-                    reason = " ".join(str(getattr(err, "cause", None) or err).split())[:400]
-                    raise RuntimeError(f"{runs[i].out}: block {span[0]}-{span[1]} failed "
-                                       f"({reason})") from None  # fmt: skip
+                records[i][span] = _result(ray, ref, [*in_flight, *merging],
+                                           f"{runs[i].out}: block {span[0]}-{span[1]}")
                 agents_done += span[1] - span[0]
                 finished += (span[1] - span[0]) * runs[i].config.episodes
                 left[i] -= 1
                 if left[i] == 0:
-                    infos[i] = merge_blocks(runs[i], records[i], workers,
-                                            time.perf_counter() - clock)
-                    if on_merged is not None:
-                        on_merged(runs[i], infos[i])
+                    wall = time.perf_counter() - clock
+                    merging[merge.remote(runs[i], records[i], workers, wall)] = i
             episodes, steps = ray.get(progress.totals.remote())
             episodes = max(episodes, finished)  # a block's last report may still be on its way
             if (episodes, agents_done) != shown:  # redraw on news only (a log file stays short)
@@ -315,6 +316,18 @@ def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None
     finally:
         bar.close()
     return infos
+
+
+def _result(ray, ref, others, what: str):
+    """``ray.get(ref)``; if the task failed, cancel ``others`` and raise ``RuntimeError``
+    naming ``what`` and the task's own error, on one line."""
+    try:
+        return ray.get(ref)
+    except Exception as err:  # a diverged or broken block: stop the run
+        for other in others:
+            ray.cancel(other, force=True)
+        reason = " ".join(str(getattr(err, "cause", None) or err).split())[:400]
+        raise RuntimeError(f"{what} failed ({reason})") from None
 
 
 def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float) -> dict:
