@@ -125,6 +125,36 @@ def test_resume_after_an_interrupted_driver(ray_local, tmp_path):
     assert json.loads((out / "run_info.json").read_text())["agent_steps"] == steps
 
 
+@pytest.mark.slow
+def test_interrupted_driver_then_resume(ray_local, tmp_path):
+    """A real interruption: the driver (a process of its own, on the session's Ray) gets
+    SIGINT after a block's first checkpoint and exits 130; --resume finishes the run with the
+    one-process arrays and step count."""
+    import signal
+    import subprocess
+    import time
+
+    fields = dict(agent="flat", runs=4, episodes=40, seed=2, checkpoint_every=5)
+    out = tmp_path / "run"
+    address = ray_local.get_runtime_context().gcs_address
+    driver = subprocess.Popen(
+        [sys.executable, "-m", "skillchain_torch.trainers.cli", "train", *_flags(**fields),
+         "--out", str(out), "--workers", "2", "--block-size", "1", "--quiet", "--ray-address",
+         address], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not list(out.glob("blocks/*/checkpoints/ckpt_*.pt")):
+        assert driver.poll() is None and time.monotonic() < deadline, driver.stderr.read()
+        time.sleep(0.2)
+    driver.send_signal(signal.SIGINT)
+    assert driver.wait(timeout=120) == 130
+    assert "continue with: skillchain train --resume" in driver.stderr.read()
+    assert not (out / "returns.npy").exists()
+    assert main(["train", "--resume", str(out), "--quiet"]) == 0
+    reference = _one_process(**fields)
+    _same(out, reference)
+    assert json.loads((out / "run_info.json").read_text())["agent_steps"] == reference.agent_steps
+
+
 @pytest.mark.parametrize("argv", [["--workers", "2"], ["--workers", "2", "--block-size", "1"]])
 def test_missing_ray_is_one_line(tmp_path, capsys, monkeypatch, argv):
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
