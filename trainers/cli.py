@@ -48,6 +48,8 @@ OUTPUTS = (
     "diverged.json",  # a diverged run's returns so far (PopulationTrainer.DIVERGED_OUTPUTS)
     "partial_returns.npy",
     "partial_lengths.npy",
+    "blocks",  # a sharded run's (distributed.py): --overwrite must not reuse its blocks
+    "sharding.json",
 )
 # Options that define the run; with --resume the saved config is used instead.
 CONFIG_OPTIONS = (

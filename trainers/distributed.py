@@ -157,6 +157,10 @@ def run_block(config: TrainConfig, block_dir: str | Path, threads: int = 1,
 
     block_dir = Path(block_dir)
     if (block_dir / DONE).is_file():
+        saved = TrainConfig.load_json(block_dir / "config.json").mismatches(config)
+        if saved:  # never merge another run's rows
+            raise ValueError(f"{block_dir} holds a block of another run (fields "
+                             f"{', '.join(saved)} differ); remove it")  # fmt: skip
         return json.loads((block_dir / DONE).read_text())
     trainer = PopulationTrainer(config, out_dir=block_dir, num_threads=threads, native=native)
     discovery = None

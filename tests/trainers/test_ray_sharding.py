@@ -125,6 +125,15 @@ def test_resume_after_an_interrupted_driver(ray_local, tmp_path):
     assert json.loads((out / "run_info.json").read_text())["agent_steps"] == steps
 
 
+def test_overwrite_does_not_reuse_blocks(ray_local, tmp_path):
+    """--overwrite of a sharded run removes its blocks: the new run's rows are its own."""
+    out = tmp_path / "run"
+    base = ["train", *_flags(**TINY), "--out", str(out), "--workers", "2", "--quiet"]
+    assert main(base) == 0
+    assert main([*base[:-1], "--seed", "11", "--overwrite", "--quiet"]) == 0
+    _same(out, _one_process(**{**TINY, "seed": 11}))
+
+
 @pytest.mark.slow
 def test_interrupted_driver_then_resume(ray_local, tmp_path):
     """A real interruption: the driver (a process of its own, on the session's Ray) gets
