@@ -175,7 +175,7 @@ def run_block(config: TrainConfig, block_dir: str | Path, threads: int = 1,
         block_dir.mkdir(parents=True, exist_ok=True)
         config.save_json(block_dir / "config.json")
     if progress is not None:
-        _Reporter(progress, block_dir.name).register(trainer)
+        _Reporter(progress, str(block_dir)).register(trainer)  # unique across a sweep's cells
     if crash_once is not None and not Path(crash_once).exists():
         def die(trainer, path):
             Path(crash_once).touch()
