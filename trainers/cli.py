@@ -335,7 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run every cell of SPEC's grid (agents x maps x TrainConfig fields x "
         "seeds) as a run directory OUT/<cell>/, the cells' blocks of agents sharing one Ray "
         "pool; complete cells are skipped on a re-run. Then write OUT/summary.md (window "
-        "means with 95%% intervals) and OUT/summary.png. Needs pip install "
+        "means with 95% intervals) and OUT/summary.png. Needs pip install "
         "skillchain_torch[ray].",
     )
     sweep.add_argument("spec", type=Path, help="sweep spec, TOML (or YAML with PyYAML)")
