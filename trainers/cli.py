@@ -4,6 +4,8 @@
         --seed 0 --out runs/flat
     skillchain train --resume runs/flat          # continue from the last checkpoint
     skillchain summarize runs/flat               # the table of returns per episode window
+    skillchain train ... --workers 2             # agents in blocks on Ray workers (distributed.py)
+    skillchain sweep grid.toml --out sweeps/x    # a grid of runs on Ray, then a summary (sweep.py)
 
 ``train`` writes ``DIR/config.json``, ``DIR/tb/`` (TensorBoard), ``DIR/checkpoints/``, and at
 the end ``DIR/returns.npy`` (float64 [runs, episodes]), ``DIR/lengths.npy`` (int64),
@@ -46,6 +48,8 @@ OUTPUTS = (
     "diverged.json",  # a diverged run's returns so far (PopulationTrainer.DIVERGED_OUTPUTS)
     "partial_returns.npy",
     "partial_lengths.npy",
+    "blocks",  # a sharded run's (distributed.py): --overwrite must not reuse its blocks
+    "sharding.json",
 )
 # Options that define the run; with --resume the saved config is used instead.
 CONFIG_OPTIONS = (
@@ -282,6 +286,28 @@ def build_parser() -> argparse.ArgumentParser:
         "rounded in torch's order: bit for bit the runs of versions before them)",
     )
     train.add_argument("--quiet", action="store_true", help="no progress bar")
+    train.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="train the agents on N Ray workers in blocks, merged into --out bit for bit "
+        "(default 1: this process; needs pip install skillchain_torch[ray])",
+    )
+    train.add_argument(
+        "--block-size",
+        type=int,
+        default=None,
+        metavar="B",
+        help="with --workers: agents per block, handed to workers as they free up "
+        "(default: blocks that shrink, each 1/(2N) of the agents left)",
+    )
+    train.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDR",
+        help="with --workers: the Ray cluster to use (default: RAY_ADDRESS, else a local Ray "
+        "of N CPUs)",
+    )
     summary = sub.add_parser("summarize", help="print the returns table of a finished run")
     summary.add_argument("dir", type=Path, help="run directory")
     reproduce = sub.add_parser(
@@ -319,8 +345,27 @@ def build_parser() -> argparse.ArgumentParser:
     )
     verify.add_argument("dir", type=Path, help="run directory")
     verify.add_argument("--agents", type=int, nargs="+", required=True, help="agent indices")
+    sweep = sub.add_parser(
+        "sweep",
+        help="run a grid of configurations on Ray and compare them",
+        description="Run every cell of SPEC's grid (agents x maps x TrainConfig fields x "
+        "seeds) as a run directory OUT/<cell>/, the cells' blocks of agents sharing one Ray "
+        "pool; complete cells are skipped on a re-run. Then write OUT/summary.md (window "
+        "means with 95% intervals) and OUT/summary.png. Needs pip install "
+        "skillchain_torch[ray].",
+    )
+    sweep.add_argument("spec", type=Path, help="sweep spec, TOML (or YAML with PyYAML)")
+    sweep.add_argument("--out", type=Path, default=None,
+                       help="output directory (default: the spec's out, else its name)")
+    sweep.add_argument("--workers", type=int, default=None,
+                       help="Ray workers (default: the spec's workers, else every CPU)")
+    sweep.add_argument("--block-size", type=int, default=None, metavar="B",
+                       help="agents per block (default: blocks that shrink, as train --workers)")
+    sweep.add_argument("--ray-address", default=None, metavar="ADDR",
+                       help="the Ray cluster to use (default: RAY_ADDRESS, else a local Ray)")
+    sweep.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.commands = {"train": train, "summarize": summary, "reproduce": reproduce,
-                       "verify": verify}
+                       "verify": verify, "sweep": sweep}
     return parser
 
 
@@ -361,6 +406,8 @@ def main(argv: list[str] | None = None) -> int:
         return _reproduce(command, args)
     if args.command == "verify":
         return _verify(command, args)
+    if args.command == "sweep":
+        return _sweep(command, args)
     return _train(command, args)
 
 
@@ -383,6 +430,35 @@ def _reproduce(parser, args) -> int:
         print("\ninterrupted; continue with the same command", file=sys.stderr)
         return 130
     print(f"report: {path}")
+    return 0
+
+
+def _sweep(parser, args) -> int:
+    from .distributed import require_ray
+    from .sweep import run_sweep
+
+    for flag, value in (("--workers", args.workers), ("--block-size", args.block_size)):
+        if value is not None and value < 1:
+            parser.error(f"{flag} must be >= 1, got {value}")
+    try:
+        require_ray("skillchain sweep")
+    except ImportError as err:
+        parser.error(str(err))
+    try:
+        result = run_sweep(args.spec, out=args.out, workers=args.workers,
+                           block_size=args.block_size, address=args.ray_address,
+                           quiet=args.quiet)  # fmt: skip
+    except ValueError as err:
+        parser.error(_one_line(err))
+    except RuntimeError as err:  # a block failed (a diverged learner)
+        _fail(parser, _one_line(err) + "; fix it and run the same command again")
+    except KeyboardInterrupt:
+        print("\ninterrupted; continue with the same command", file=sys.stderr)
+        return 130
+    if not args.quiet:
+        print(result["table"])
+    print(f"{len(result['ran'])} cells run, {len(result['skipped'])} skipped (complete); "
+          f"summary: {result['summary']}")
     return 0
 
 
@@ -538,6 +614,7 @@ def _train(parser, args) -> int:
                      f"of this machine), got {args.threads}")  # fmt: skip
     native = False if args.torch_only else None
     created = None
+    sharded = _check_sharding(parser, args)
     if args.resume is not None:
         out = args.resume
         given = [_flag(n) for n in CONFIG_OPTIONS if getattr(args, n) is not None]
@@ -561,6 +638,8 @@ def _train(parser, args) -> int:
                 parser.error(_flag_message(err, ["device"]))
             hint = " (resume with --device cpu)" if "device" in getattr(err, "fields", ()) else ""
             parser.error(f"{path}: {err}{hint}")
+        if sharded or (out / "sharding.json").is_file():
+            return _train_sharded(parser, args, config, out, native, resume=True)
         checkpoint = latest_checkpoint(out)
         if checkpoint is None:
             parser.error(f"--resume {out}: no checkpoint under {out / 'checkpoints'}")
@@ -589,7 +668,72 @@ def _train(parser, args) -> int:
         except OSError as err:
             _remove_created(created)
             _fail(parser, f"--out {out}: cannot write there ({_write_error(err)})")
+        if sharded:
+            return _train_sharded(parser, args, config, out, native, resume=False)
     return _run(trainer, out, quiet=args.quiet, parser=parser, created=created)
+
+
+def _check_sharding(parser, args) -> bool:
+    """Check --workers, --block-size and --ray-address; True for a sharded run (N > 1)."""
+    if args.workers is not None and args.workers < 1:
+        parser.error(f"--workers must be >= 1, got {args.workers}")
+    if args.block_size is not None and args.block_size < 1:
+        parser.error(f"--block-size must be >= 1, got {args.block_size}")
+    sharded = (args.workers or 1) > 1
+    resumed = args.resume is not None and (args.resume / "sharding.json").is_file()
+    if not (sharded or resumed):
+        for flag, value in (("--block-size", args.block_size),
+                            ("--ray-address", args.ray_address)):
+            if value is not None:
+                parser.error(f"{flag} needs --workers N with N > 1")
+    if sharded and args.resume is not None and not resumed:
+        parser.error(f"--resume {args.resume} is a one-process run and resumes as one; do not "
+                     f"pass --workers")
+    if args.resume is not None and args.block_size is not None:
+        parser.error("--resume keeps the run's blocks; do not pass --block-size")
+    runs = args.runs if args.runs is not None else 1  # TrainConfig's default
+    if args.resume is None and args.block_size is not None and args.block_size > runs > 0:
+        parser.error(f"--block-size must be at most --runs ({runs}), got {args.block_size}")
+    if sharded or resumed:
+        from .distributed import require_ray
+
+        try:
+            require_ray("--workers" if sharded else f"--resume {args.resume} (a sharded run)")
+        except ImportError as err:
+            parser.error(str(err))
+    return sharded
+
+
+def _train_sharded(parser, args, config, out: Path, native, resume: bool) -> int:
+    """Train ``config``'s agents in blocks on Ray workers and merge them into ``out``."""
+    import time
+
+    from .distributed import ShardedRun, plan_blocks, record_driver_wall, run_sharded
+
+    if resume:
+        run = ShardedRun.load(out, config)
+        saved = json.loads((out / "sharding.json").read_text())["workers"]
+        workers = args.workers or saved
+    else:
+        workers = args.workers
+        run = ShardedRun(config, out, plan_blocks(config.runs, workers, args.block_size))
+        run.save(workers)
+    clock = time.perf_counter()
+    try:
+        [info] = run_sharded([run], workers, address=args.ray_address, threads=args.threads,
+                             native=native, quiet=args.quiet)
+    except KeyboardInterrupt:
+        record_driver_wall(out, time.perf_counter() - clock)
+        print(f"\ninterrupted; continue with: skillchain train --resume {out}", file=sys.stderr)
+        return 130
+    except RuntimeError as err:
+        record_driver_wall(out, time.perf_counter() - clock)
+        _fail(parser, _one_line(err) + f"; once fixed, continue with: skillchain train "
+                                       f"--resume {out}")
+    if not args.quiet:
+        print(f"done: {info['agent_steps']:,} agent steps in {info['wall_time_s']:.1f} s on "
+              f"{workers} workers ({info['blocks']} blocks); outputs in {out}", file=sys.stderr)
+    return 0
 
 
 def _run(trainer, out: Path, quiet: bool, parser=None, created: Path | None = None) -> int:

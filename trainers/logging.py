@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from torchrl.record.loggers import TensorboardLogger
 
-__all__ = ["TensorBoardHook", "population_interval", "experiment_name"]
+__all__ = ["TensorBoardHook", "population_interval", "experiment_name", "log_population_arrays"]
 
 
 def population_interval(values) -> tuple[float, float, float]:
@@ -45,6 +45,49 @@ def population_interval(values) -> tuple[float, float, float]:
 
 def experiment_name(config) -> str:
     return f"{config.agent}_{config.map}_P{config.runs}_seed{config.seed}"
+
+
+def log_config(logger, config) -> None:
+    """The hyperparameters and a text table of ``config`` (once, at a run's start)."""
+    config = config.to_dict()
+    logger.log_hparams({k: v if v is not None else "None" for k, v in config.items()})
+    rows = "\n".join(f"| {k} | {v} |" for k, v in config.items())
+    logger.experiment.add_text("config", "| field | value |\n|---|---|\n" + rows, 0)
+
+
+def log_population_arrays(logger, config, returns, lengths, n_options=None,
+                          per_agent: bool = True) -> None:
+    """After the fact, the scalars :class:`TensorBoardHook` writes during a run, from its
+    arrays ``[P, E]`` (a sharded run's merged blocks): the config, ``agent_{p}/return`` and
+    ``length``, ``population/*`` per episode, and with ``n_options`` ``agent_{p}/options`` and
+    ``discovery/options_mean``/``_max``. (``perf/*`` needs the run's clock: not written.)
+
+    Example:
+        >>> import tempfile, numpy as np
+        >>> from skillchain_torch.trainers import TrainConfig
+        >>> logger = TensorboardLogger("x", log_dir=tempfile.mkdtemp())
+        >>> log_population_arrays(logger, TrainConfig(), np.ones((2, 3)), np.ones((2, 3), int))
+    """
+    log = logger.log_scalar
+    log_config(logger, config)
+    P, E = returns.shape
+    if per_agent:
+        for p in range(P):
+            for e in range(E):
+                log(f"agent_{p}/return", float(returns[p, e]), step=e + 1)
+                log(f"agent_{p}/length", int(lengths[p, e]), step=e + 1)
+                if n_options is not None:
+                    log(f"agent_{p}/options", float(n_options[p, e]), step=e + 1)
+    for e in range(E):
+        mean, low, high = population_interval(returns[:, e])
+        log("population/return_mean", mean, step=e + 1)
+        log("population/return_ci_low", low, step=e + 1)
+        log("population/return_ci_high", high, step=e + 1)
+        log("population/length_mean", float(lengths[:, e].mean()), step=e + 1)
+        if n_options is not None:
+            log("discovery/options_mean", float(n_options[:, e].mean()), step=e + 1)
+            log("discovery/options_max", float(n_options[:, e].max()), step=e + 1)
+    logger.experiment.flush()
 
 
 class TensorBoardHook:
@@ -85,10 +128,7 @@ class TensorBoardHook:
         self._last = (trainer.wall_time, trainer.agent_steps)
         if trainer.global_step > 0:
             return  # resumed: the hyperparameters are already logged
-        config = trainer.config.to_dict()
-        self.logger.log_hparams({k: v if v is not None else "None" for k, v in config.items()})
-        rows = "\n".join(f"| {k} | {v} |" for k, v in config.items())
-        self.logger.experiment.add_text("config", "| field | value |\n|---|---|\n" + rows, 0)
+        log_config(self.logger, trainer.config)
 
     def post_episodes(self, trainer, batch) -> None:
         log = self.logger.log_scalar

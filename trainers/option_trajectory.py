@@ -26,7 +26,7 @@ import torch
 from skillchain_torch.agents import HierarchicalAgent
 from skillchain_torch.envs.pinball import PinballEnv, load_map
 
-__all__ = ["greedy_trajectory", "best_greedy_trajectory", "plot_option_trajectory",
+__all__ = ["greedy_trajectory", "best_greedy_trajectory", "solution_rank", "plot_option_trajectory",
            "save_option_trajectory", "OPTION_COLORS"]  # fmt: skip
 
 # Distinct colours for option slots; primitives are black.
@@ -93,8 +93,13 @@ def best_greedy_trajectory(agent, map_name: str, agents=None, max_steps: int = 2
     runs = [greedy_trajectory(agent, int(p), map_name, max_steps, seed=t,
                               epsilon=0.0 if t == 0 else agent.epsilon)
             for p in agents for t in range(tries)]
-    return max(runs, key=lambda run: (run["terminated"], bool((run["options"] >= 0).any()),
-                                      run["return"]))  # fmt: skip
+    return max(runs, key=solution_rank)
+
+
+def solution_rank(run: dict) -> tuple:
+    """How :func:`best_greedy_trajectory` ranks episodes: reaching the goal, then using an
+    option, then the return (``max`` keeps the first of equals)."""
+    return run["terminated"], bool((run["options"] >= 0).any()), run["return"]
 
 
 def plot_option_trajectory(run: dict, map_name: str, ax=None, title: str | None = None):

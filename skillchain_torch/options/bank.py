@@ -312,6 +312,30 @@ class OptionBank(nn.Module):
         new.map, new.legacy = self.map, self.legacy
         return new
 
+    @classmethod
+    def concat(cls, banks: list[OptionBank]) -> OptionBank:
+        """One bank of the agents of ``banks``, in order (the inverse of splitting a population
+        with :meth:`select_agents`): per-agent state is joined, shared state (feature bases)
+        comes from the first bank.
+
+        Example:
+            >>> bank = OptionBank.build(population=3, slots=2)
+            >>> OptionBank.concat([bank.select_agents([0]), bank.select_agents([1, 2])]).population
+            3
+        """
+        first = banks[0]
+        population = sum(b.population for b in banks)
+        # Per-agent entries are those whose leading size follows the population (a 1- and a
+        # 2-agent bank differ there); comparing shapes avoids guessing from a coincident size.
+        one, two = first.select_agents([0]).state_dict(), first.select_agents([0, 0]).state_dict()
+        per_agent = {k for k in one if one[k].shape != two[k].shape}
+        new = first.select_agents([0] * population)
+        states = [b.state_dict() for b in banks]
+        joined = {k: torch.cat([s[k] for s in states]) if k in per_agent else v
+                  for k, v in states[0].items()}
+        new.load_state_dict(joined)
+        return new
+
     # ------------------------------------------------------------------------------- files
     def save(self, path: str | os.PathLike) -> None:
         """Write the bank (format version, parts' configs, what the options were learned on
