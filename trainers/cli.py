@@ -851,12 +851,21 @@ def _write_discovery(trainer, discovery, out: Path) -> None:
     (out / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent), indent=1) + "\n")
     # Figure 4b: the best greedy solution through options, among the eight agents that hold
     # the most options (ties: the best last return).
+    import torch
+
     from .option_trajectory import best_greedy_trajectory, save_option_trajectory
 
     held = trainer.agent.bank.live().sum(-1).cpu().numpy()
     last = np.nan_to_num(trainer.returns[:, -1], nan=-np.inf)
     order = sorted(range(len(held)), key=lambda p: (-held[p], -last[p]))[:8]
-    run = best_greedy_trajectory(trainer.agent, trainer.config.map, agents=order)
+    # The replays are many tiny torch calls: at torch's default threads they ran ~12x slower on
+    # a busy machine than at the trainer's one thread (a sharded run's workers draw at 1).
+    threads = torch.get_num_threads()
+    torch.set_num_threads(trainer.num_threads or threads)
+    try:
+        run = best_greedy_trajectory(trainer.agent, trainer.config.map, agents=order)
+    finally:
+        torch.set_num_threads(threads)
     save_option_trajectory(run, trainer.config.map, out / "option_trajectory.png")
 
 
