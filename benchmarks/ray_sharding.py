@@ -9,9 +9,10 @@ training, merge), for (a) skill chaining (default 10 runs x 100 episodes, seed 1
 the flat agent (default 100 x 250, seed 0), on pinball_simple_single:
 
 * ``1 process``: today's path;
-* ``2 workers static``: the agents cut into 2 contiguous shards (``--block-size ceil(P/2)``);
-* ``2 workers dynamic, shrinking blocks``: the default, blocks handed to the worker that
-  frees up, each a ``2N``-th of the agents left (large first, single agents last);
+* ``2 workers static``: the agents cut into 2 contiguous shards (``--block-size ceil(P/2)``,
+  the default);
+* ``2 workers dynamic, shrinking blocks`` (``--block-size shrink``): blocks handed to the
+  worker that frees up, each a ``2N``-th of the agents left (large first, single agents last);
 * ``2 workers dynamic, blocks of 1``: every agent its own block (``--block-size 1``).
 
 ``driver s`` is the run's own ``run_info.json`` wall time (for sharded runs from the first
@@ -53,16 +54,18 @@ def timed(argv: list[str]) -> float:
 
 
 def compare(name: str, agent: str, runs: int, episodes: int, seed: int, workers: int,
-            root: Path) -> list[dict]:  # fmt: skip
-    """The three rows of one run (see the module docstring)."""
+            root: Path, skip_ones: bool = False) -> list[dict]:  # fmt: skip
+    """The rows of one run (see the module docstring), each printed as it is measured
+    (``skip_ones``: leave out blocks of 1)."""
     base = ["train", "--agent", agent, "--map", "pinball_simple_single", "--runs", str(runs),
             "--episodes", str(episodes), "--seed", str(seed), "--quiet"]
     modes = [("1 process", []),
              (f"{workers} workers static",
               ["--workers", str(workers), "--block-size", str(math.ceil(runs / workers))]),
-             (f"{workers} workers dynamic, shrinking blocks", ["--workers", str(workers)]),
+             (f"{workers} workers dynamic, shrinking blocks",
+              ["--workers", str(workers), "--block-size", "shrink"]),
              (f"{workers} workers dynamic, blocks of 1",
-              ["--workers", str(workers), "--block-size", "1"])]
+              ["--workers", str(workers), "--block-size", "1"])][:3 if skip_ones else 4]
     rows, reference = [], None
     for mode, extra in modes:
         out = root / f"{name}-{mode.replace(' ', '-')}"
@@ -77,6 +80,7 @@ def compare(name: str, agent: str, runs: int, episodes: int, seed: int, workers:
         rows.append({"run": name, "mode": mode, "blocks": info.get("blocks", 1),
                      "driver": info["wall_time_s"], "command": command, "same": same,
                      "steps": info["agent_steps"], "load": f"{before} -> {load()}"})
+        print(table(rows[-1:]).splitlines()[-1], flush=True)  # a killed run keeps its rows
     return rows
 
 
@@ -123,6 +127,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--only", choices=("sc", "flat"), default=None)
     parser.add_argument("--sweep", action="store_true", help="also the 4-cell sweep")
+    parser.add_argument("--skip-blocks-of-1", action="store_true",
+                        help="leave out the blocks-of-1 rows (the slowest)")
     parser.add_argument("--sweep-size", type=size, default=(10, 100), metavar="RUNSxEPISODES")
     args = parser.parse_args()
     rows = []
@@ -130,10 +136,10 @@ def main() -> None:
         root = Path(tmp)
         if args.only in (None, "sc"):
             rows += compare(f"skill-chaining {args.sc[0]}x{args.sc[1]}", "skill-chaining",
-                            *args.sc, 100, args.workers, root)
+                            *args.sc, 100, args.workers, root, args.skip_blocks_of_1)
         if args.only in (None, "flat"):
             rows += compare(f"flat {args.flat[0]}x{args.flat[1]}", "flat", *args.flat, 0,
-                            args.workers, root)
+                            args.workers, root, args.skip_blocks_of_1)
         print(table(rows), flush=True)
         if args.sweep:
             print()

@@ -295,11 +295,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--block-size",
-        type=int,
+        type=_block_size,
         default=None,
         metavar="B",
-        help="with --workers: agents per block, handed to workers as they free up "
-        "(default: blocks that shrink, each 1/(2N) of the agents left)",
+        help="with --workers: agents per block, handed to workers as they free up, or "
+        "'shrink' (each block 1/(2N) of the agents left) (default: one block per worker, which "
+        "keeps the agents' steps batched)",
     )
     train.add_argument(
         "--ray-address",
@@ -359,8 +360,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="output directory (default: the spec's out, else its name)")
     sweep.add_argument("--workers", type=int, default=None,
                        help="Ray workers (default: the spec's workers, else every CPU)")
-    sweep.add_argument("--block-size", type=int, default=None, metavar="B",
-                       help="agents per block (default: blocks that shrink, as train --workers)")
+    sweep.add_argument("--block-size", type=_block_size, default=None, metavar="B",
+                       help="agents per block (default: one block per worker, as train --workers)")
     sweep.add_argument("--ray-address", default=None, metavar="ADDR",
                        help="the Ray cluster to use (default: RAY_ADDRESS, else a local Ray)")
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -438,7 +439,7 @@ def _sweep(parser, args) -> int:
     from .sweep import run_sweep
 
     for flag, value in (("--workers", args.workers), ("--block-size", args.block_size)):
-        if value is not None and value < 1:
+        if isinstance(value, int) and value < 1:
             parser.error(f"{flag} must be >= 1, got {value}")
     try:
         require_ray("skillchain sweep")
@@ -673,11 +674,22 @@ def _train(parser, args) -> int:
     return _run(trainer, out, quiet=args.quiet, parser=parser, created=created)
 
 
+def _block_size(text: str) -> int | str:
+    """``--block-size``: a number of agents, or ``shrink``."""
+    if text == "shrink":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of agents or 'shrink', got "
+                                         f"{text!r}") from None
+
+
 def _check_sharding(parser, args) -> bool:
     """Check --workers, --block-size and --ray-address; True for a sharded run (N > 1)."""
     if args.workers is not None and args.workers < 1:
         parser.error(f"--workers must be >= 1, got {args.workers}")
-    if args.block_size is not None and args.block_size < 1:
+    if isinstance(args.block_size, int) and args.block_size < 1:
         parser.error(f"--block-size must be >= 1, got {args.block_size}")
     sharded = (args.workers or 1) > 1
     resumed = args.resume is not None and (args.resume / "sharding.json").is_file()
@@ -692,7 +704,7 @@ def _check_sharding(parser, args) -> bool:
     if args.resume is not None and args.block_size is not None:
         parser.error("--resume keeps the run's blocks; do not pass --block-size")
     runs = args.runs if args.runs is not None else 1  # TrainConfig's default
-    if args.resume is None and args.block_size is not None and args.block_size > runs > 0:
+    if args.resume is None and isinstance(args.block_size, int) and args.block_size > runs > 0:
         parser.error(f"--block-size must be at most --runs ({runs}), got {args.block_size}")
     if sharded or resumed:
         from .distributed import require_ray

@@ -214,7 +214,7 @@ def run_sweep(spec_path: str | Path, out: str | Path | None = None, workers: int
     out = Path(out if out is not None else spec.get("out") or Path(spec_path).stem)
     workers = int(workers or spec.get("workers") or os.cpu_count() or 1)
     size = block_size or spec.get("block_size")
-    if workers < 1 or (size is not None and int(size) < 1):
+    if workers < 1 or (size is not None and size != "shrink" and int(size) < 1):
         raise ValueError(f"{spec_path}: workers and block_size must be >= 1")
     todo, skipped = [], []
     for name, config in cells:

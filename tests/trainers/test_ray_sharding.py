@@ -181,6 +181,7 @@ def test_missing_ray_is_one_line(tmp_path, capsys, monkeypatch, argv):
     (["--block-size", "2"], "--block-size needs --workers N with N > 1"),
     (["--workers", "2", "--block-size", "0"], "--block-size must be >= 1, got 0"),
     (["--workers", "2", "--block-size", "5"], "--block-size must be at most --runs (4), got 5"),
+    (["--workers", "2", "--block-size", "few"], "expected a number of agents or 'shrink'"),
 ])
 def test_sharding_flags_are_checked(tmp_path, capsys, argv, message):
     with pytest.raises(SystemExit) as info:
@@ -198,3 +199,14 @@ def test_shrinking_blocks_cover_every_agent_once(runs, workers):
     assert [a for a, _ in spans] == [0] + [b for _, b in spans[:-1]] and spans[-1][1] == runs
     sizes = [b - a for a, b in spans]
     assert sizes == sorted(sizes, reverse=True) and sizes[-1] == 1
+
+
+def test_default_blocks_are_one_per_worker_and_shrink_is_guided():
+    """Measured on an idle machine, batching beats balancing (benchmarks/README.md): by default
+    each worker takes one block; ``shrink`` is the guided schedule."""
+    from skillchain_torch.trainers.distributed import guided_spans, plan_blocks
+
+    assert plan_blocks(100, 2) == [(0, 50), (50, 100)]
+    assert plan_blocks(7, 3) == [(0, 3), (3, 6), (6, 7)]
+    assert plan_blocks(10, 2, "shrink") == guided_spans(10, 2)
+    assert plan_blocks(10, 2, 4) == [(0, 4), (4, 8), (8, 10)]
