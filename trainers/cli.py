@@ -438,9 +438,8 @@ def _sweep(parser, args) -> int:
     from .distributed import require_ray
     from .sweep import run_sweep
 
-    for flag, value in (("--workers", args.workers), ("--block-size", args.block_size)):
-        if isinstance(value, int) and value < 1:
-            parser.error(f"{flag} must be >= 1, got {value}")
+    if args.workers is not None and args.workers < 1:
+        parser.error(f"--workers must be >= 1, got {args.workers}")
     try:
         require_ray("skillchain sweep")
     except ImportError as err:
@@ -679,18 +678,19 @@ def _block_size(text: str) -> int | str:
     if text == "shrink":
         return text
     try:
-        return int(text)
+        size = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number of agents or 'shrink', got "
                                          f"{text!r}") from None
+    if size < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {size}")
+    return size
 
 
 def _check_sharding(parser, args) -> bool:
     """Check --workers, --block-size and --ray-address; True for a sharded run (N > 1)."""
     if args.workers is not None and args.workers < 1:
         parser.error(f"--workers must be >= 1, got {args.workers}")
-    if isinstance(args.block_size, int) and args.block_size < 1:
-        parser.error(f"--block-size must be >= 1, got {args.block_size}")
     sharded = (args.workers or 1) > 1
     resumed = args.resume is not None and (args.resume / "sharding.json").is_file()
     if not (sharded or resumed):
@@ -774,6 +774,17 @@ def _run(trainer, out: Path, quiet: bool, parser=None, created: Path | None = No
     _fail(parser, f"cannot write the run's outputs in {out}: {reason}{hint}")
 
 
+def _interrupted(out: Path, every: int) -> str:
+    """What to do after Ctrl-C: resume from a checkpoint, or start again if none was written."""
+    from .checkpoint import latest_checkpoint
+
+    if latest_checkpoint(out) is not None:
+        return f"\ninterrupted; continue with: skillchain train --resume {out}"
+    when = f"every {every} episodes" if every else "disabled by --checkpoint-every 0"
+    return (f"\ninterrupted before the first checkpoint ({when}); nothing to resume, run the "
+            f"same command again with --overwrite")
+
+
 def _train_and_write(trainer, out: Path, quiet: bool) -> int:
     import torch
 
@@ -796,7 +807,7 @@ def _train_and_write(trainer, out: Path, quiet: bool) -> int:
     except KeyboardInterrupt:
         bar.close()
         tb.close()
-        print(f"\ninterrupted; continue with: skillchain train --resume {out}", file=sys.stderr)
+        print(_interrupted(out, trainer.config.checkpoint_every), file=sys.stderr)
         return 130
     except FloatingPointError:  # a learner diverged: _run reports it
         bar.close()

@@ -36,15 +36,19 @@ from .config import TrainConfig
 __all__ = ["verify_run", "resolve_options_path"]
 
 
+def _beside(options: str, run_dir: Path):
+    """``options`` relative to ``run_dir`` and to each folder above it, nearest first (a
+    study's given-options runs name their options relative to the study's folder)."""
+    for base in (run_dir, *run_dir.resolve().parents):
+        yield base / options
+
+
 def resolve_options_path(options: str, run_dir: Path) -> Path:
     """``options`` as given if it exists, else relative to ``run_dir`` or a folder above it."""
     path = Path(options)
     if path.is_file() or path.is_absolute():
         return path
-    for base in (run_dir, *run_dir.resolve().parents):
-        if (base / path).is_file():
-            return base / path
-    return path
+    return next((c for c in _beside(options, run_dir) if c.is_file()), path)
 
 
 def _saved_population(path: Path) -> int:
@@ -55,21 +59,23 @@ def _saved_population(path: Path) -> int:
 
 def _source_run(options: str, run_dir: Path) -> Path | None:
     """The skill-chaining run directory that wrote ``options`` (``DIR/options.pt``), if present."""
-    for base in (run_dir, *run_dir.resolve().parents):
-        source = (base / options).parent
+    for candidate in _beside(options, run_dir):
+        source = candidate.parent
         if all((source / n).is_file() for n in ("config.json", "returns.npy", "lengths.npy")):
             return source
     return None
 
 
 def verify_run(run_dir: str | Path, agents, native: bool | None = None,
-               progress: bool = False, _keep: Path | None = None) -> list[dict]:  # fmt: skip
+               progress: bool = False, keep_options: Path | None = None) -> list[dict]:  # fmt: skip
     """Re-run ``agents`` of the run in ``run_dir`` one at a time; one dict per agent with
     ``agent``, ``seed``, ``match``, ``returns_match``, ``lengths_match``, ``first_difference``
     (the first episode that differs, or ``None``) and ``wall_time_s``.
 
     ``native``: the kernels to re-run with (default: those ``run_info.json`` names, else the
-    default). ``ValueError`` names a missing file or an agent outside the run.
+    default). ``keep_options``: where to save the options of an agent that matched (how a
+    given-options run's options are rebuilt). ``ValueError`` names a missing file or an agent
+    outside the run.
     """
     from .population import PopulationTrainer
 
@@ -116,9 +122,9 @@ def verify_run(run_dir: str | Path, agents, native: bool | None = None,
         same_l = np.array_equal(trainer.lengths[0], lengths[p])
         differ = np.nonzero((trainer.returns[0] != returns[p]) | (trainer.lengths[0] != lengths[p]))
         first = int(differ[0][0]) + 1 if differ[0].size else None
-        if _keep is not None and same_r and same_l:  # a verified agent's options, to rebuild
-            _keep.parent.mkdir(parents=True, exist_ok=True)  # a given-options run from them
-            trainer.agent.bank.save(_keep)
+        if keep_options is not None and same_r and same_l:  # only verified options rebuild
+            keep_options.parent.mkdir(parents=True, exist_ok=True)  # a given-options run
+            trainer.agent.bank.save(keep_options)
         results.append({"agent": p, "seed": single.seed, "match": same_r and same_l,
                         "returns_match": same_r, "lengths_match": same_l,
                         "first_difference": first, "wall_time_s": trainer.elapsed,
@@ -140,7 +146,7 @@ def _rebuilt_options(single: TrainConfig, source: Path, p: int, options_agent, n
     q = options_agent if options_agent is not None else p % runs
     cache = source / "verify-options" / f"agent{q}.pt"
     if not cache.is_file():
-        [check] = verify_run(source, [q], native=native, progress=progress, _keep=cache)
+        [check] = verify_run(source, [q], native=native, progress=progress, keep_options=cache)
         if not check["match"]:
             episode = check["first_difference"]
             raise ValueError(f"{source}: agent {q} does not reproduce (episode {episode}), "

@@ -192,3 +192,36 @@ def test_option_start_and_learning_flags_reach_the_config(tmp_path):
     assert (cfg.option_alpha, cfg.completion_reward) == (0.0, 500.0)
     with pytest.raises(SystemExit):
         parser.parse_args(["train", "--policy-start", "copy"])
+
+
+@pytest.mark.parametrize("checkpoint_every", [0, 1])
+def test_ctrl_c_says_resume_only_when_a_checkpoint_exists(tmp_path, capsys, monkeypatch,
+                                                          checkpoint_every):
+    """Ctrl-C after the second episode of three: with a checkpoint behind it the hint is
+    --resume, and that resume finishes the run; with none written it says so and --overwrite
+    starts again."""
+    from skillchain_torch.trainers.population import PopulationTrainer
+
+    train = PopulationTrainer.train
+
+    def interrupted(self, *args, **kwargs):
+        def stop(trainer, *rest):
+            if trainer.episodes_done.min() >= 2:
+                raise KeyboardInterrupt
+        self.register_op("post_episodes", stop, name="ctrl_c")
+        return train(self, *args, **kwargs)
+
+    out = tmp_path / "run"
+    argv = ["train", "--out", str(out), *SMALL, "--episodes", "3",
+            "--checkpoint-every", str(checkpoint_every)]
+    monkeypatch.setattr(PopulationTrainer, "train", interrupted)
+    assert main(argv) == 130
+    err = capsys.readouterr().err
+    monkeypatch.setattr(PopulationTrainer, "train", train)
+    if checkpoint_every:
+        assert f"continue with: skillchain train --resume {out}" in err
+        assert main(["train", "--resume", str(out), "--quiet"]) == 0
+    else:
+        assert "nothing to resume" in err and "--resume" not in err
+        assert main([*argv, "--overwrite"]) == 0
+    assert np.load(out / "returns.npy").shape == (1, 3)
