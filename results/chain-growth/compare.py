@@ -3,7 +3,7 @@
 The setting's skill-chaining agents ran as runs of 50 agents (``--seed 1000`` and ``--seed
 1050``; by the seed contract they are agents 0-99 of one population with seed 1000). They are
 compared, episode window by window, with the first episodes of the paper study's flat and
-default skill-chaining runs on the same seeds (``results/paper/simple``): an agent's first 50
+gestation-10 skill-chaining runs on the same seeds (``results/paper-v2/simple``): an agent's first 50
 episodes do not depend on how many episodes it runs in all.
 
     python results/chain-growth/compare.py --name g2 runs/confirm/g2-s1000 runs/confirm/g2-s1050
@@ -21,7 +21,7 @@ import numpy as np
 from skillchain_torch.trainers.paper_report import diff_ci, mean_ci
 
 HERE = Path(__file__).resolve().parent
-PAPER = HERE.parent / "paper" / "simple"
+PAPER = HERE.parent / "paper-v2" / "simple"
 WINDOWS = ((1, 10), (11, 25), (26, 50))
 
 
@@ -43,7 +43,7 @@ def main() -> None:
     E = R.shape[1]
     peers = {k: np.load(PAPER / k / "returns.npy")[: len(R), :E]
              for k in ("flat", "skill-chaining")}  # fmt: skip
-    rows = ["| episodes | flat | gestation 10 (results/paper) | " + args.name
+    rows = ["| episodes | flat | gestation 10 (results/paper-v2) | " + args.name
             + " | " + args.name + " - flat | " + args.name + " - gestation 10 |",
             "|---|---|---|---|---|---|"]  # fmt: skip
     result = {}
