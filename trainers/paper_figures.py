@@ -27,7 +27,7 @@ import torch
 
 from .option_trajectory import OPTION_COLORS, _single_agent, greedy_trajectory
 
-__all__ = ["plot_curves", "load_trained", "good_solutions", "solution_figure",
+__all__ = ["plot_curves", "load_trained", "trained_agents", "good_solutions", "solution_figure",
            "option_rollout", "initiation_figure", "AGENT_COLORS"]  # fmt: skip
 
 AGENT_COLORS = {"flat": "tab:gray", "skill-chaining": "tab:blue", "given-options": "tab:red"}
@@ -105,6 +105,32 @@ def load_trained(run_dir: str | Path):
     return trainer
 
 
+def trained_agents(run_dir: str | Path):
+    """``(trainer, first_agent)``: the trained agents of a run, and the run's index of the
+    trainer's agent 0.
+
+    A run sharded over Ray workers (``sharding.json``) keeps its checkpoints in its blocks, and
+    one block's agents are one population: this takes the block whose agents hold the most
+    options (the first on ties), so figures show ``first_agent + p`` for its agent ``p``.
+    Any other run is :func:`load_trained` with ``first_agent`` 0.
+    """
+    import json
+
+    from .checkpoint import latest_checkpoint
+
+    run_dir = Path(run_dir)
+    sharding = run_dir / "sharding.json"
+    if latest_checkpoint(run_dir) is not None or not sharding.is_file():
+        return load_trained(run_dir), 0
+    best = None
+    for a, b in json.loads(sharding.read_text())["blocks"]:
+        trainer = load_trained(run_dir / "blocks" / f"{a}-{b}")
+        held = float(trainer.agent.bank.live().sum(-1).double().mean())
+        if best is None or held > best[0]:
+            best = (held, trainer, a)
+    return best[1], best[2]
+
+
 def good_solutions(agent, map_name: str, agents=None, seeds=range(12),
                    max_steps: int = 3000) -> list[dict]:  # fmt: skip
     """For each start state of the map, the best episode among ``agents`` (default all) that
@@ -129,8 +155,10 @@ def good_solutions(agent, map_name: str, agents=None, seeds=range(12),
     return [v[1] for _, v in sorted(by_start.items())]
 
 
-def solution_figure(runs: list[dict], map_name: str, path: str | Path, title: str = "") -> Path:
-    """Figure 4b / 7: each greedy solution coloured by option (primitives black)."""
+def solution_figure(runs: list[dict], map_name: str, path: str | Path, title: str = "",
+                    first_agent: int = 0) -> Path:  # fmt: skip
+    """Figure 4b / 7: each greedy solution coloured by option (primitives black); agents are
+    labelled ``first_agent + p`` (see :func:`trained_agents`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -140,7 +168,7 @@ def solution_figure(runs: list[dict], map_name: str, path: str | Path, title: st
 
     fig, axes = plt.subplots(1, len(runs), figsize=(5 * len(runs), 5), squeeze=False)
     for ax, run in zip(axes[0], runs):
-        plot_option_trajectory(run, map_name, ax=ax)
+        plot_option_trajectory({**run, "agent": first_agent + run["agent"]}, map_name, ax=ax)
     return _save(fig, path, title, dpi=120)
 
 
@@ -174,9 +202,10 @@ def option_rollout(agent, p: int, slot: int, start_obs: torch.Tensor, map_name: 
 
 def initiation_figure(agent, runs: list[dict], map_name: str, path: str | Path,
                       samples: int = 3, resolution: int = 40, seed: int = 0,
-                      title: str = "") -> Path:  # fmt: skip
+                      title: str = "", first_agent: int = 0) -> Path:  # fmt: skip
     """Figure 5 / 8: the initiation sets of the options used in ``runs`` (each a density plot)
-    with ``samples`` trajectories of each option's policy from stored positive examples."""
+    with ``samples`` trajectories of each option's policy from stored positive examples;
+    agents are labelled ``first_agent + p``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -201,7 +230,7 @@ def initiation_figure(agent, runs: list[dict], map_name: str, path: str | Path,
     clf = agent.bank.classifier
     for ax, (p, k) in zip(axes.ravel(), used):
         plot_initiation_set(agent.bank, p, k, pinball_map, ax=ax, resolution=resolution,
-                            title=f"agent {p}, option {k}")  # fmt: skip
+                            title=f"agent {first_agent + p}, option {k}")  # fmt: skip
         n = int(clf.count[p, k])
         positives = clf.examples[p, k, :n][clf.labels[p, k, :n]]
         inside = positives[clf.contains_points(p, k, positives)] if len(positives) else positives

@@ -257,9 +257,9 @@ def _figures(out: Path, instance: str, runs: dict, quiet: bool) -> list[str]:
     from .paper_figures import (
         good_solutions,
         initiation_figure,
-        load_trained,
         plot_curves,
         solution_figure,  # fmt: skip
+        trained_agents,
     )
 
     curve, sol, sets = ("fig4a", "fig4b", "fig5") if instance == "simple" else \
@@ -273,7 +273,7 @@ def _figures(out: Path, instance: str, runs: dict, quiet: bool) -> list[str]:
     lines = [f"![learning curves]({curve}.png)", ""]
     sc_dir = out / instance / "skill-chaining"
     try:
-        trainer = load_trained(sc_dir)
+        trainer, first = trained_agents(sc_dir)
     except (ValueError, FileNotFoundError) as err:
         return lines + [f"(Figures {sol} and {sets} need the skill-chaining run's checkpoint: "
                         f"{err})", ""]
@@ -281,11 +281,11 @@ def _figures(out: Path, instance: str, runs: dict, quiet: bool) -> list[str]:
     held = agent.bank.live().sum(-1).numpy()
     order = sorted(range(agent.population), key=lambda p: -held[p])[:16]
     solutions = good_solutions(agent, cfg["map"], agents=order)
-    solution_figure(solutions, cfg["map"], out / f"{sol}.png",
+    solution_figure(solutions, cfg["map"], out / f"{sol}.png", first_agent=first,
                     title="greedy solutions coloured by option (primitive actions black)")
     lines += [f"![greedy solutions]({sol}.png)", ""]
     try:
-        initiation_figure(agent, solutions, cfg["map"], out / f"{sets}.png",
+        initiation_figure(agent, solutions, cfg["map"], out / f"{sets}.png", first_agent=first,
                           title="initiation sets and sample trajectories of the options used")
         lines += [f"![initiation sets]({sets}.png)", ""]
     except ValueError as err:

@@ -3,8 +3,8 @@
 The setting's skill-chaining agents ran as runs of 50 agents (``--seed 1000`` and ``--seed
 1050``; by the seed contract they are agents 0-99 of one population with seed 1000). They are
 compared, episode window by window, with the first episodes of the paper study's flat and
-gestation-10 skill-chaining runs on the same seeds (``results/paper-v2/simple``): an agent's first 50
-episodes do not depend on how many episodes it runs in all.
+gestation-10 skill-chaining runs on the same seeds (``results/paper-v2/simple``): an agent's
+first 50 episodes do not depend on how many episodes it runs in all.
 
     python results/chain-growth/compare.py --name g2 runs/confirm/g2-s1000 runs/confirm/g2-s1050
 """

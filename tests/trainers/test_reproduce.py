@@ -48,3 +48,32 @@ def test_reproduce_resumes_and_its_runs_verify(tmp_path):
     assert bad.returncode == 1 and "MISMATCH" in bad.stdout
     outside = skillchain("verify", str(out / "simple" / "flat"), "--agents", "5")
     assert outside.returncode == 2 and "agent 5 is not in" in outside.stderr
+
+
+def test_figures_take_the_trained_agents_of_a_sharded_run_from_a_block(tmp_path):
+    """A run sharded on Ray keeps its checkpoints in its blocks: the figures take the block
+    whose agents hold the most options and label its agents by their place in the run."""
+    from skillchain_torch.trainers.config import TrainConfig
+    from skillchain_torch.trainers.distributed import block_config, run_block
+    from skillchain_torch.trainers.paper_figures import load_trained, trained_agents
+
+    cfg = TrainConfig(agent="skill-chaining", map="pinball_box", runs=3, episodes=3, seed=11,
+                      max_episode_steps=300, checkpoint_every=1, gestation=1).resolved()
+    out = tmp_path / "run"
+    out.mkdir()
+    cfg.save_json(out / "config.json")
+    spans = [(0, 1), (1, 3)]
+    (out / "sharding.json").write_text(json.dumps({"workers": 2, "blocks": spans}))
+    held = {}
+    for a, b in spans:
+        block = out / "blocks" / f"{a}-{b}"
+        run_block(block_config(cfg, a, b, block), block)
+        bank = load_trained(block).agent.bank
+        held[a] = float(bank.live().sum(-1).double().mean())
+    with pytest.raises(ValueError, match="no checkpoint"):
+        load_trained(out)  # the merged run has none of its own
+    trainer, first = trained_agents(out)
+    assert first == max(held, key=lambda a: (held[a], -a))
+    assert trainer.agent.population == dict(spans)[first] - first
+    block, offset = trained_agents(out / "blocks" / "1-3")  # an ordinary run: its own agents
+    assert offset == 0 and block.agent.population == 2
