@@ -2,6 +2,7 @@
 record, per step, its position, the option executing (-1: primitive) and the action.
 
     python results/paper/diagnostics/runaway.py results/paper/simple/skill-chaining 84 225
+    python results/paper/diagnostics/runaway.py results/paper/simple/flat 13 249
 
 prints where the episode's steps went and saves the trace to runs/diag/trace_<agent>_<episode>.npy.
 """
@@ -24,7 +25,10 @@ observe = t.agent.observe
 def traced(obs, reward):
     out = observe(obs, reward)
     if t.episodes_done[0] == episode - 1:
-        trace.append([*t.agent.obs[0].tolist(), int(t.agent.option[0]), int(t.agent.decision[0])])
+        option = getattr(t.agent, "option", None)  # a flat agent has none: all primitive
+        decision = getattr(t.agent, "decision", t.agent.actions)
+        trace.append([*obs[0].tolist(), -1 if option is None else int(option[0]),
+                      int(decision[0])])
     return out
 t.agent.observe = traced
 t.train()
