@@ -288,7 +288,7 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     train.add_argument(
         "--workers",
-        type=_workers,
+        type=_positive,
         default=None,
         help="train the agents on N Ray workers in blocks, merged into --out bit for bit "
         "(default 1: this process; needs pip install skillchain_torch[ray])",
@@ -358,7 +358,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("spec", type=Path, help="sweep spec, TOML (or YAML with PyYAML)")
     sweep.add_argument("--out", type=Path, default=None,
                        help="output directory (default: the spec's out, else its name)")
-    sweep.add_argument("--workers", type=_workers, default=None,
+    sweep.add_argument("--workers", type=_positive, default=None,
                        help="Ray workers (default: the spec's workers, else every CPU)")
     sweep.add_argument("--block-size", type=_block_size, default=None, metavar="B",
                        help="agents per block (default: one block per worker, as train --workers)")
@@ -671,29 +671,16 @@ def _train(parser, args) -> int:
     return _run(trainer, out, quiet=args.quiet, parser=parser, created=created)
 
 
-def _workers(text: str) -> int:
-    """``--workers``: a number of Ray workers, at least 1."""
-    try:
-        workers = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of workers, got {text!r}") from None
-    if workers < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {workers}")
-    return workers
-
-
 def _block_size(text: str) -> int | str:
     """``--block-size``: a number of agents, or ``shrink``."""
     if text == "shrink":
         return text
     try:
-        size = int(text)
+        int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number of agents or 'shrink', got "
                                          f"{text!r}") from None
-    if size < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {size}")
-    return size
+    return _positive(text)
 
 
 def _check_sharding(parser, args) -> bool:

@@ -177,9 +177,9 @@ def test_missing_ray_is_one_line(tmp_path, capsys, monkeypatch, argv):
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (["--workers", "0"], "--workers: must be >= 1, got 0"),
+    (["--workers", "0"], "--workers: expected a positive integer, got 0"),
     (["--block-size", "2"], "--block-size needs --workers N with N > 1"),
-    (["--workers", "2", "--block-size", "0"], "--block-size: must be >= 1, got 0"),
+    (["--workers", "2", "--block-size", "0"], "--block-size: expected a positive integer, got 0"),
     (["--workers", "2", "--block-size", "5"], "--block-size must be at most --runs (4), got 5"),
     (["--workers", "2", "--block-size", "few"], "expected a number of agents or 'shrink'"),
 ])
