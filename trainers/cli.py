@@ -76,6 +76,8 @@ CONFIG_OPTIONS = (
     "one_class_fits",
     "failure_bootstrap",
     "keep_negatives",
+    "intra_option_primitives",
+    "option_interruption",
     "policy_start",
     "value_start",
     "value_bonus",
@@ -203,6 +205,21 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="initiation-set stores never drop a failure to make room for a success's "
         "positives",
+    )
+    train.add_argument(
+        "--intra-option-primitives",
+        choices=("on", "off"),
+        default=None,
+        help="the top level's primitive values also learn from the steps options take "
+        "(one-step Q-learning; default off: only from the agent's own primitive decisions, "
+        "as the paper's SMDP Sarsa)",
+    )
+    train.add_argument(
+        "--option-interruption",
+        choices=("on", "off"),
+        default=None,
+        help="an executing option stops where it is no longer the top level's greedy decision "
+        "(default off: options run to their end, as the paper's)",
     )
     train.add_argument(
         "--failure-bootstrap",
@@ -496,8 +513,9 @@ def _config_from_args(parser, args) -> TrainConfig:
     given = {k: v for k, v in given.items() if v is not None}
     if given.get("options_agent") == "each":
         given["options_agent"] = None
-    if "keep_negatives" in given:
-        given["keep_negatives"] = given["keep_negatives"] == "on"
+    for name in ("keep_negatives", "intra_option_primitives", "option_interruption"):
+        if name in given:
+            given[name] = given[name] == "on"
     if args.device is not None:
         given["device"] = args.device
     agent = given.get("agent", TrainConfig().agent)

@@ -38,7 +38,8 @@ __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "
 # saved config without one of them ran with this value (whatever today's default is).
 LEGACY_FIELDS = {"failure_bootstrap": "decision", "keep_negatives": False, "policy_start": "zero",
                  "value_start": "max-sample", "value_bonus": 0.0, "option_alpha": 0.0005,
-                 "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15}
+                 "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15,
+                 "intra_option_primitives": False, "option_interruption": False}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
@@ -52,7 +53,8 @@ _DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestati
                      "option_alpha", "gestation", "convergence_threshold")
 UNREAD_FIELDS = {
     "flat": _DISCOVERY_FIELDS + ("options", "options_agent", "failure_bootstrap",
-                                 "completion_reward"),
+                                 "completion_reward", "intra_option_primitives",
+                                 "option_interruption"),
     "given-options": _DISCOVERY_FIELDS,
     "skill-chaining": ("options", "options_agent"),
 }
@@ -224,6 +226,12 @@ class TrainConfig:
         failure_bootstrap: what a timed-out option execution's SMDP target bootstraps on
             (``"decision"``: Sarsa's ``Q(s', d')``, the paper; ``"primitives"``: the best
             primitive at ``s'``; see :class:`~skillchain_torch.agents.HierarchicalAgent`).
+        intra_option_primitives: the top level's primitive values also learn, by one-step
+            Q-learning, from the steps taken inside options (the paper: only from the agent's
+            own primitive decisions; see :class:`~skillchain_torch.agents.HierarchicalAgent`).
+        option_interruption: an executing option stops where it is no longer the top level's
+            greedy decision (Sutton, Precup & Singh 1999; the paper's options run to their end;
+            see :class:`~skillchain_torch.agents.HierarchicalAgent`).
         keep_negatives: the initiation classifiers' stores never drop a failure to make room
             for a success's positives (see :class:`~skillchain_torch.options.
             InitiationClassifier`).
@@ -269,6 +277,8 @@ class TrainConfig:
     one_class_fits: bool = _DEFAULT.one_class_fits
     failure_bootstrap: str = "primitives"
     keep_negatives: bool = True
+    intra_option_primitives: bool = False
+    option_interruption: bool = False
     policy_start: str = "top-level"
     option_alpha: float = 0.0
     completion_reward: float = 10_000.0

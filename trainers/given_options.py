@@ -110,6 +110,8 @@ class GivenOptionsAgent(HierarchicalAgent):
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device,
                          failure_bootstrap=cfg.failure_bootstrap,
+                         intra_option_primitives=cfg.intra_option_primitives,
+                         interruption=cfg.option_interruption,
                          overlap=True,  # as the options were learned (no-op if unrelated)
                          completion_reward=cfg.completion_reward, native=native)
         self.config = cfg

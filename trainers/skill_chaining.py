@@ -47,6 +47,8 @@ class SkillChainingRunAgent(SkillChainingAgent):
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device,
                          failure_bootstrap=cfg.failure_bootstrap, native=native,
+                         intra_option_primitives=cfg.intra_option_primitives,
+                         interruption=cfg.option_interruption,
                          reading=cfg.reading, policy_start=cfg.policy_start,
                          value_start=cfg.value_start, value_bonus=cfg.value_bonus,
                          completion_reward=cfg.completion_reward, gestation=cfg.gestation,

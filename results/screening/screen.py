@@ -15,7 +15,8 @@ The cells: the initiation-set reading (first: ``pos0-everything-clearned``; loca
 ``-top`` (a joining option's policy starts as the agent's own, ``--policy-start top-level``)
 ``-agN`` (``Q(s, o)`` starts as the agent's state value plus N, ``--value-start agent``),
 ``-oaX`` (``--option-alpha X``), ``-CX`` (``--completion-reward X``), ``-gN`` (``--gestation
-N``) and ``-ctX`` (``--convergence-threshold X``).
+N``), ``-ctX`` (``--convergence-threshold X``), ``-ipo`` (``--intra-option-primitives on``) and
+``-int`` (``--option-interruption on``).
 """
 
 from __future__ import annotations
@@ -74,11 +75,15 @@ def cells(names: list[str]) -> dict[str, list[str]]:
                 out[name] += ["--completion-reward", part[1:]]
             elif part.startswith("ct"):  # e.g. ct0.5: convergence threshold 0.5
                 out[name] += ["--convergence-threshold", part[2:]]
+            elif part == "ipo":  # the top level's primitives also learn inside options
+                out[name] += ["--intra-option-primitives", "on"]
+            elif part == "int":  # options are interrupted where no longer greedy
+                out[name] += ["--option-interruption", "on"]
             elif part.startswith("g") and part[1:].isdigit():  # e.g. g3: gestation 3 episodes
                 out[name] += ["--gestation", part[1:]]
             else:
                 raise ValueError(f"cell {name!r}: unknown part {part!r} "
-                                 f"(top, agN, oaX, CX, gN, ctX)")  # fmt: skip
+                                 f"(top, agN, oaX, CX, gN, ctX, ipo, int)")  # fmt: skip
     return out
 
 

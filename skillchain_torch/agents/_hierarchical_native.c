@@ -159,7 +159,7 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  *      max_option_steps, alpha_o, completion, step, step_stride, executable_from,
  *      out_obs, out_code, out_contains, out_phi, out_decision, out_option, out_action,
  *      out_ret, out_duration, q, d_next, decision_ended, option_delta, smdp_delta,
- *      info_duration, info_return, started, value, fail_boot)
+ *      info_duration, info_return, started, value, fail_boot, state_phi, interrupt)
  *
  * HierarchicalAgent.transition for every row, given what needs torch or Python at s'
  * (memberships, targets, features, uniforms [P, 4]): the intra-option updates, the decision's
@@ -175,19 +175,24 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  * of s' is next_code [P, Fo], or when that is 0 the columns [Fo] (int64) of phi_next (the
  * heads' Fourier features among the top level's, shared_fourier_columns). value [P] (or 0):
  * Q(s', d) of the decision d in force after the step, for stepped rows (skill chaining's
- * gestation samples). */
+ * gestation samples). state_phi [P, F] (or 0): phi(s) of the current state, for intra-option
+ * learning of the top-level primitive values (HierarchicalAgent's intra_option_primitives):
+ * a step taken inside an option moves w[a] . phi(s) toward r + gamma max_d Q(s', d) over the
+ * decisions available at s' (as smdp_row with k = 1); the row then holds phi(s').
+ * interrupt: an executing option stops at s' where it is no longer the greedy decision
+ * (HierarchicalAgent's interruption). */
 NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, A, F, Fo, step_stride;
     unsigned long long w_p, wo_p, obs_p, code_p, con_p, phi_p, dec_p, opt_p, act_p, ret_p,
         dur_p, nobs_p, rew_p, term_p, trunc_p, st_p, conn_p, reach_p, phin_p, coden_p,
         cols_p, status_p, u_p, step_p, o_obs, o_code, o_con, o_phi, o_dec, o_opt, o_act, o_ret,
-        o_dur, q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p, value_p;
+        o_dur, q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p, value_p, sphi_p;
     double epsilon, option_epsilon, gamma, alpha_o, completion;
-    int use_gamma, fail_boot;
+    int use_gamma, fail_boot, interrupt;
     long long max_option_steps, executable_from;
     if (!PyArg_ParseTuple(args,
-                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKKKi",
+                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKKKiKi",
                           &P, &K, &A, &F, &Fo, &w_p, &wo_p, &obs_p, &code_p, &con_p, &phi_p,
                           &dec_p, &opt_p, &act_p, &ret_p, &dur_p, &nobs_p, &rew_p, &term_p,
                           &trunc_p, &st_p, &conn_p, &reach_p, &phin_p, &coden_p, &cols_p,
@@ -195,7 +200,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
                           &max_option_steps, &alpha_o, &completion, &step_p, &step_stride,
                           &executable_from, &o_obs, &o_code, &o_con, &o_phi, &o_dec, &o_opt,
                           &o_act, &o_ret, &o_dur, &q_p, &dn_p, &de_p, &od_p, &sd_p, &id_p,
-                          &ir_p, &started_p, &value_p, &fail_boot))
+                          &ir_p, &started_p, &value_p, &fail_boot, &sphi_p, &interrupt))
         return NULL;
     Py_ssize_t D = A + K;
     if (D > MAX_CHOICES) {
@@ -207,7 +212,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
     const double *next_obs = F64(nobs_p), *reward = F64(rew_p), *phi_next = F64(phin_p);
     const double *next_code = F64(coden_p), *u = F64(u_p), *step_size = F64(step_p);
     const int64_t *columns = I64(cols_p);
-    double *value = F64(value_p);
+    double *value = F64(value_p), *state_phi = F64(sphi_p);
     const int64_t *decision = I64(dec_p), *option = I64(opt_p), *action = I64(act_p);
     const int64_t *duration = I64(dur_p), *status = I64(status_p);
     const uint8_t *contains = U8(con_p), *terminated = U8(term_p), *truncated = U8(trunc_p);
@@ -260,16 +265,27 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         int executing = option[p] >= 0;
         int stops = executing && (reach[option[p]] || k_steps >= max_option_steps);
         int dec_end = go && (!executing || stops || ended);
-        decision_ended[p] = (uint8_t)dec_end;
-        info_duration[p] = k_steps;
-        info_return[p] = R;
+        int inside = go && executing;  /* the option chose the action at s */
 
-        /* Next top-level decision at s' (also the bootstrap decision d'), then SMDP Sarsa. */
+        /* Next top-level decision at s' (also the bootstrap decision d'). The values at s' are
+         * needed where the decision ended, and inside options for the intra-option update of
+         * the primitives (max_d Q(s', d)) and for interruption (Q(s', o) against it). */
         for (Py_ssize_t d = 0; d < D; d++)
             ok[d] = d < A ? 1 : (st[d - A] >= executable_from && in_next[d - A]);
         double *qp = q + p * D;
-        int64_t dn = choose_row(w + p * D * F, phi_next + p * F, ok, D, F, A, dec_end,
+        int valued = dec_end || (inside && (state_phi || interrupt));
+        int64_t dn = choose_row(w + p * D * F, phi_next + p * F, ok, D, F, A, valued,
                                 epsilon, up, qp);
+        /* Interruption: the option in force stops where it is no longer the greedy decision
+         * (Q(s', o) below max_d Q(s', d)); the top level then takes d'. */
+        if (interrupt && inside && !dec_end) {
+            Py_ssize_t o = A + option[p];
+            double q_o = ok[o] ? qp[o] : dot(w + (p * D + o) * F, phi_next + p * F, F);
+            if (q_o < masked_max(qp, ok, D)) dec_end = 1;
+        }
+        decision_ended[p] = (uint8_t)dec_end;
+        info_duration[p] = k_steps;
+        info_return[p] = R;
         d_next[p] = dn;
         /* A timed-out execution bootstraps on the best primitive at s' (fail_boot), not on
          * d': d' is often the same optimistic option again (see failure_bootstrap). */
@@ -278,6 +294,14 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
             q_boot = qp[0];
             for (Py_ssize_t a = 1; a < A; a++) q_boot = qp[a] > q_boot ? qp[a] : q_boot;
         }
+        /* Intra-option learning of the primitive the option took at s (a row other than the
+         * option's, so the order of the two updates does not matter). */
+        if (state_phi && inside)
+            smdp_row(w + (p * D + action[p]) * F, state_phi + p * F, F, r, 1,
+                     term ? 0.0 : masked_max(qp, ok, D), term, step_size, step_stride, gamma,
+                     use_gamma);
+        if (state_phi && go)
+            for (Py_ssize_t f = 0; f < F; f++) state_phi[p * F + f] = phi_next[p * F + f];
         smdp_delta[p] = dec_end ? smdp_row(w + (p * D + decision[p]) * F, phi + p * F, F, R,
                                            k_steps < 1 ? 1 : k_steps, q_boot, term, step_size,
                                            step_stride, gamma, use_gamma)

@@ -136,6 +136,21 @@ class HierarchicalAgent(nn.Module):
             lowers its value only by about its own cost (~100-300) and an agent can re-run
             a failing option dozens of times in one episode; ``"primitives"`` charges the
             failure against what the agent can do without options.
+        intra_option_primitives: the top level's primitive values also learn from the steps
+            inside options. SMDP Sarsa updates ``Q(s, a)`` of a primitive only when the agent
+            chose ``a`` itself, so once options carry most steps the primitives' values go
+            stale where the options run. With this on, each step ``(s, a, r, s')`` taken by
+            an executing option also moves the top-level ``Q(s, a)`` toward
+            ``r + gamma max_d Q(s', d)`` over the decisions available at ``s'`` (no bootstrap
+            when the episode terminated): intra-option value learning with a primitive as a
+            one-step option (Sutton, Precup & Singh 1999, section 7), off-policy. Off (the
+            paper's SMDP Sarsa) by default.
+        interruption: an executing option stops at ``s'`` where it is no longer the greedy
+            decision, ``Q(s', o) < max_d Q(s', d)`` over the decisions available there, and
+            the top level decides again (Sutton, Precup & Singh 1999, section 5: interrupting
+            never does worse than running the option to its end, under the values). The
+            interrupted execution is neither a success nor a failure of the option. Off (the
+            paper: options run until their termination predicate fires or they time out).
         device: torch device (default: the bank's).
         native: run the per-step arithmetic in C (:mod:`.native_hierarchical`, and the
             classifier's memberships and fits, :mod:`~skillchain_torch.options.
@@ -160,6 +175,8 @@ class HierarchicalAgent(nn.Module):
         scale_step_size: bool = False,
         overlap: bool = False,
         failure_bootstrap: str = "decision",
+        intra_option_primitives: bool = False,
+        interruption: bool = False,
         device: torch.device | str | None = None,
         native: bool | None = None,
     ):
@@ -168,6 +185,8 @@ class HierarchicalAgent(nn.Module):
             raise ValueError(f"failure_bootstrap must be one of {', '.join(FAILURE_BOOTSTRAPS)}"
                              f", got {failure_bootstrap!r}")  # fmt: skip
         self.failure_bootstrap = failure_bootstrap
+        self.intra_option_primitives = bool(intra_option_primitives)
+        self.interruption = bool(interruption)
         device = torch.device(bank.status.device if device is None else device)
         self.bank = bank.to(device)
         self.native = _native.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES)
@@ -203,6 +222,10 @@ class HierarchicalAgent(nn.Module):
         self.option_code = bank.q_head.encode(self.obs)  # the option heads' code of s
         self.contains = torch.zeros(P, self.slots, dtype=torch.bool, device=device)  # s in I_k
         self.decision_phi = torch.zeros(P, self.features.num_features, **f64)  # phi(s_decision)
+        # phi(s) of the current state, kept only for intra_option_primitives (its updates
+        # are at s, which need not be where the decision in force was taken).
+        self.state_phi = torch.zeros(P, self.features.num_features if intra_option_primitives
+                                     else 0, **f64)  # fmt: skip
         self.decision = torch.zeros(P, **i64)  # in force (< 5 or 5 + k)
         self.option = torch.full((P,), -1, **i64)  # executing slot or -1
         self.action = torch.zeros(P, **i64)  # primitive taken at s
@@ -224,7 +247,8 @@ class HierarchicalAgent(nn.Module):
     # parameters, buffers and submodules) costs more than the tensor maths for these.
     _PLAIN = frozenset({"obs", "contains", "decision_phi", "decision", "option", "action",
                         "decision_return", "duration", "active", "option_code", "last_q",
-                        "last_phi", "last_value", "_index", "_raw_contains"})  # fmt: skip
+                        "last_phi", "last_value", "_index", "_raw_contains", "state_phi",
+                        "last_available"})  # fmt: skip
     # The compiled transition also returns Q(s', d) of the decision in force (last_value).
     WANTS_VALUE = False
 
@@ -287,12 +311,12 @@ class HierarchicalAgent(nn.Module):
         if self.native:
             q, decision = _native.choose(self.q_head.weight, phi, available, rows,
                                          NUM_PRIMITIVES, uniforms, self.epsilon)  # fmt: skip
-            self.last_phi, self.last_q = phi, q
+            self.last_phi, self.last_q, self.last_available = phi, q, available
             return phi, decision
         # Value only what can be chosen: the primitives, and the few options whose initiation
         # set holds the state (each value is the same row sum as a full forward).
         q = self.q_head.forward_mask(phi, available & rows[:, None], dense=NUM_PRIMITIVES)
-        self.last_phi, self.last_q = phi, q
+        self.last_phi, self.last_q, self.last_available = phi, q, available
         return phi, epsilon_greedy(q, available, self.epsilon, uniforms,
                                    check=False)  # primitives are always available
 
@@ -333,6 +357,8 @@ class HierarchicalAgent(nn.Module):
         phi, decision = self._choose(obs, phi, contains, u[:, :2], rows=rows)
         self.obs = obs
         self.option_code = self.option_code.index_copy(0, index, code_rows)
+        if self.intra_option_primitives:
+            self.state_phi = self.state_phi.index_copy(0, index, phi_rows)
         self.contains = torch.where(rows[:, None], contains, self.contains)
         self._new_decisions(rows, phi_rows, decision, index=index)
         self._act(rows, u[:, 2:])
@@ -404,15 +430,33 @@ class HierarchicalAgent(nn.Module):
         hit = reached.gather(1, slot[:, None])[:, 0]  # the executing option's target at s'
         option_stops = executing & (hit | (self.duration >= self.max_option_steps))
         decision_ended = stepped & (~executing | option_stops | ended)
-        # Next top-level decision at s' (also the bootstrap decision d').
+        # Next top-level decision at s' (also the bootstrap decision d'). With intra-option
+        # primitives or interruption, the rows inside an option value s' too.
+        inside = stepped & executing
+        if self.intra_option_primitives or self.interruption:
+            valued = decision_ended | inside
+        else:
+            valued = decision_ended
         phi_next, d_next = self._choose(next_obs, phi_next, contains_next, u[:, :2],
-                                        rows=decision_ended)  # fmt: skip
+                                        rows=valued)  # fmt: skip
+        if self.intra_option_primitives or self.interruption:  # max_d Q(s', d)
+            best = self.last_q.masked_fill(~self.last_available, -torch.inf).max(1).values
+        if self.interruption:  # the option stops where it is no longer greedy
+            q_o = torch.where(self.last_available.gather(1, self.decision[:, None])[:, 0],
+                              self.last_q.gather(1, self.decision[:, None])[:, 0],
+                              self.q_head.q_value(phi_next, self.decision))
+            decision_ended = decision_ended | (inside & ~decision_ended & (q_o < best))
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
         if self.failure_bootstrap == "primitives":  # a timeout: the best primitive at s'
             timed_out = option_stops & ~hit
-            best = self.last_q[:, :NUM_PRIMITIVES].max(1).values
-            q_next = torch.where(timed_out, best, q_next)
+            best_primitive = self.last_q[:, :NUM_PRIMITIVES].max(1).values
+            q_next = torch.where(timed_out, best_primitive, q_next)
+        if self.intra_option_primitives:  # the option's primitive, one Q-learning step at s
+            self.update(self.q_head, self.state_phi, self.action, reward,
+                        torch.ones_like(self.duration), phi_next, self.action, terminated,
+                        active=inside, next_value=best)
+            self.state_phi = torch.where(stepped[:, None], phi_next, self.state_phi)
         smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
                                  self.decision_return, self.duration.clamp(min=1), phi_next,
                                  d_next, terminated, active=decision_ended, next_value=q_next)
@@ -547,11 +591,15 @@ class HierarchicalAgent(nn.Module):
         self.decision_phi = state["phi"].to(device).clone()
         for name in self._EPISODE:
             setattr(self, name, state["episode"][name].to(device).clone())
-        self.option_code = self._encode(self.obs)[1]  # a pure function of s
+        phi, self.option_code = self._encode(self.obs)  # pure functions of s
+        if self.intra_option_primitives:
+            self.state_phi = phi
 
     def extra_repr(self) -> str:
         return (f"population={self.population}, slots={self.slots}, "
                 f"epsilon={self.epsilon}, option_epsilon={self.option_epsilon}, "
                 f"gamma={self.gamma}, max_option_steps={self.max_option_steps}, "
                 f"failure_bootstrap={self.failure_bootstrap}, "
+                f"intra_option_primitives={self.intra_option_primitives}, "
+                f"interruption={self.interruption}, "
                 f"active={int(self._index.numel())}, native={self.native}")

@@ -14,7 +14,8 @@ mirrors library pieces, with the same rules and the same uniforms:
                       Q-learning (:class:`~skillchain_torch.objectives.IntraOptionQLearning`
                       on a :class:`~skillchain_torch.options.FourierOptionQHead`, float
                       ``C``), the top-level choice (the same C function as :func:`choose`),
-                      SMDP Sarsa (:class:`~skillchain_torch.objectives.SarsaUpdate`), the
+                      SMDP Sarsa (:class:`~skillchain_torch.objectives.SarsaUpdate`, and
+                      with ``intra_option_primitives`` the option's primitive), the
                       next action (as :func:`act`)
 ====================  =====================================================================
 
@@ -165,7 +166,9 @@ def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, trun
             decision_ended.data_ptr(), option_delta.data_ptr(), smdp_delta.data_ptr(),
             info_duration.data_ptr(), info_return.data_ptr(), started.data_ptr(),
             0 if value is None else value.data_ptr(),
-            int(agent.failure_bootstrap == "primitives"))  # fmt: skip
+            int(agent.failure_bootstrap == "primitives"),
+            _own(agent, "state_phi").data_ptr() if agent.intra_option_primitives else 0,
+            int(agent.interruption))  # fmt: skip
     info = {"decision_ended": decision_ended, "duration": info_duration,
             "decision_return": info_return, "option_delta": option_delta,
             "smdp_delta": smdp_delta, "decision": state["decision"], "option": state["option"],

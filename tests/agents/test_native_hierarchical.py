@@ -115,15 +115,21 @@ def half_plane_bank(P, seed):
 
 
 @needs_native
-@pytest.mark.parametrize(("gamma", "scaled"), [(1.0, False), (0.9, False), (0.95, True)])
-def test_compiled_transition_agrees_with_the_torch_path(gamma, scaled):
+@pytest.mark.parametrize(("gamma", "scaled", "intra", "interruption", "failure"), [
+    (1.0, False, False, False, "decision"), (0.9, False, False, False, "decision"),
+    (0.95, True, False, False, "decision"), (1.0, False, True, False, "primitives"),
+    (0.9, True, True, True, "primitives"), (1.0, False, False, True, "decision")])
+def test_compiled_transition_agrees_with_the_torch_path(gamma, scaled, intra, interruption,
+                                                        failure):
     """Random transitions with terminations, truncations and rows not stepped: the same
     decisions and actions, TD errors and weights equal to rounding, with the discounted and
     per-feature step sizes too."""
     P, steps = 30, 120
     agents = [HierarchicalAgent(half_plane_bank(P, seed=1), order=2, alpha=0.01, gamma=gamma,
                                 epsilon=0.3, option_epsilon=0.3, seed=7,
-                                scale_step_size=scaled, completion_reward=50.0, native=native)
+                                scale_step_size=scaled, completion_reward=50.0,
+                                intra_option_primitives=intra, interruption=interruption,
+                                failure_bootstrap=failure, native=native)
               for native in (False, True)]  # fmt: skip
     g = gen(2)
     start = torch.rand(P, 4, dtype=F64, generator=g)

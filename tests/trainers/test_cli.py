@@ -179,6 +179,27 @@ def test_failure_bootstrap_and_kept_negatives_flags_and_legacy_configs(tmp_path)
         TrainConfig(failure_bootstrap="optimistic").validate()
 
 
+@pytest.mark.parametrize("field", ["intra_option_primitives", "option_interruption"])
+def test_top_level_learning_flags_reach_the_agent(tmp_path, field):
+    from skillchain_torch.trainers import TrainConfig
+    from skillchain_torch.trainers.cli import _config_from_args, build_parser
+    from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+
+    flag = "--" + field.replace("_", "-")
+    parser = build_parser()
+    for value, expected in (("on", True), ("off", False)):
+        args = parser.parse_args(["train", "--agent", "skill-chaining", "--out", str(tmp_path),
+                                  flag, value])
+        assert getattr(_config_from_args(parser, args), field) is expected
+    assert getattr(TrainConfig(), field) is False
+    saved = {k: v for k, v in TrainConfig().to_dict().items() if k != field}
+    assert getattr(TrainConfig.from_dict(saved), field) is False  # runs before the field
+    cfg = TrainConfig(agent="skill-chaining", runs=2, slots=2, **{field: True}).resolved()
+    agent = SkillChainingRunAgent(cfg)
+    assert (agent.intra_option_primitives, agent.interruption) == (
+        field == "intra_option_primitives", field == "option_interruption")
+
+
 def test_option_start_and_learning_flags_reach_the_config(tmp_path):
     from skillchain_torch.trainers.cli import _config_from_args, build_parser
 
