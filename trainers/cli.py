@@ -628,6 +628,7 @@ def _train(parser, args) -> int:
     if args.threads > max_threads:
         parser.error(f"--threads must be at most {max_threads} ({MAX_THREADS_PER_CPU} per CPU "
                      f"of this machine), got {args.threads}")  # fmt: skip
+    source_commit()  # read as the run starts: the code this process runs
     native = False if args.torch_only else None
     created = None
     sharded = _check_sharding(parser, args)
@@ -861,7 +862,22 @@ def _train_and_write(trainer, out: Path, quiet: bool) -> int:
 def source_commit() -> str | None:
     """The git commit of the installed source (``+dirty`` when it has uncommitted changes),
     or ``None`` outside a git checkout: recorded in ``run_info.json`` so a published run says
-    which code made it."""
+    which code made it.
+
+    Read once per process, at the first call (``skillchain train`` calls it as it starts): a
+    run takes hours, and a commit made meanwhile is not the code it runs. A resumed run
+    records the commit of the invocation that finished it."""
+    global _COMMIT
+    if _COMMIT is _UNREAD:
+        _COMMIT = _read_commit()
+    return _COMMIT
+
+
+_UNREAD = object()
+_COMMIT: object = _UNREAD
+
+
+def _read_commit() -> str | None:
     import subprocess
 
     root = Path(__file__).resolve().parent.parent
