@@ -359,8 +359,8 @@ def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float) -> d
 
     import torch
 
-    from .cli import source_commit
     from .plots import save_learning_curve
+    from .run_outputs import source_commit
 
     cfg, out = run.config, run.out
     dirs = [run.block_dir(s) for s in run.spans]

@@ -250,11 +250,11 @@ def test_ctrl_c_says_resume_only_when_a_checkpoint_exists(tmp_path, capsys, monk
 
 def test_the_commit_is_read_when_the_run_starts(tmp_path, monkeypatch):
     """run_info.json names the code the process runs, not a commit made while it ran."""
-    from skillchain_torch.trainers import cli
+    from skillchain_torch.trainers import run_outputs
 
-    monkeypatch.setattr(cli, "_COMMIT", cli._UNREAD)
+    monkeypatch.setattr(run_outputs, "_COMMIT", run_outputs._UNREAD)
     reads = iter(["aaaa", "bbbb"])
-    monkeypatch.setattr(cli, "_read_commit", lambda: next(reads))
+    monkeypatch.setattr(run_outputs, "_read_commit", lambda: next(reads))
     out = tmp_path / "run"
     assert main(["train", "--out", str(out), *SMALL]) == 0
     assert json.loads((out / "run_info.json").read_text())["commit"] == "aaaa"

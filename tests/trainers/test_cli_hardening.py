@@ -23,8 +23,8 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from skillchain_torch.trainers import cli
 from skillchain_torch.trainers import config as config_module
+from skillchain_torch.trainers import run_outputs
 from skillchain_torch.trainers.cli import main
 from skillchain_torch.trainers.config import INT64_MAX, ConfigError, TrainConfig
 
@@ -423,7 +423,7 @@ def _run_main(argv) -> tuple[int, str]:
     err = io.StringIO()
     # (without skill chaining's option figure: its greedy rollouts take ~40 s per run)
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()), \
-            mock.patch.object(cli, "_write_discovery", lambda *args: None):
+            mock.patch.object(run_outputs, "write_discovery", lambda *args: None):
         try:
             code = main(argv)
         except SystemExit as exit_:

@@ -1,0 +1,388 @@
+"""The ``skillchain`` command line's arguments: every command's parser and argument types.
+
+:func:`build_parser` is what ``skillchain`` parses with (``trainers/cli.py`` runs the
+commands); ``CONFIG_OPTIONS`` are the options that define a run (:class:`TrainConfig`'s fields;
+with ``--resume`` the saved config is used instead).
+
+Example:
+    >>> args = build_parser().parse_args(["train", "--agent", "flat", "--runs", "4"])
+    >>> args.command, args.agent, args.runs
+    ('train', 'flat', 4)
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from .agents import AGENTS
+
+__all__ = ["build_parser", "CONFIG_OPTIONS"]
+
+# Options that define the run; with --resume the saved config is used instead.
+CONFIG_OPTIONS = (
+    "agent",
+    "map",
+    "runs",
+    "episodes",
+    "seed",
+    "alpha",
+    "epsilon",
+    "gamma",
+    "order",
+    "scale_step_size",
+    "max_episode_steps",
+    "checkpoint_every",
+    "options",
+    "options_agent",
+    "slots",
+    "initiation_bias",
+    "initiation_centered",
+    "gestation_positives",
+    "initiation_start",
+    "initiation_constrain",
+    "one_class_fits",
+    "failure_bootstrap",
+    "keep_negatives",
+    "intra_option_primitives",
+    "option_interruption",
+    "policy_start",
+    "value_start",
+    "value_bonus",
+    "option_alpha",
+    "completion_reward",
+    "gestation",
+    "convergence_threshold",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="skillchain", description="Skill chaining (Konidaris & Barto, 2009) on Pinball."
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    train = sub.add_parser(
+        "train",
+        help="train a population of agents",
+        description="Train P independent agents for E episodes each.",
+    )
+    train.add_argument(
+        "--agent", choices=sorted(AGENTS), default=None, help="agent type (default: flat)"
+    )
+    train.add_argument(
+        "--map", default=None, help="Pinball map name (default: pinball_simple_single)"
+    )
+    train.add_argument("--runs", type=int, default=None, help="P, independent agents (default 1)")
+    train.add_argument(
+        "--episodes", type=int, default=None, help="E, episodes per agent (default 100)"
+    )
+    train.add_argument("--seed", type=int, default=None, help="agent p uses seed + p (default 0)")
+    train.add_argument(
+        "--alpha",
+        type=float,
+        default=None,
+        help="step size (default: 0.001 on simple maps, 0.0005 on hard maps)",
+    )
+    train.add_argument("--epsilon", type=float, default=None, help="exploration (default 0.01)")
+    train.add_argument("--gamma", type=float, default=None, help="discount (default 1)")
+    train.add_argument(
+        "--order",
+        type=int,
+        default=None,
+        help="Fourier order (default: 4 on simple maps, 5 on hard maps)",
+    )
+    train.add_argument(
+        "--scale-step-size",
+        action="store_true",
+        default=None,
+        help="per-feature step sizes alpha / ||c|| (default off)",
+    )
+    train.add_argument(
+        "--max-episode-steps",
+        type=int,
+        default=None,
+        help="truncate episodes after this many steps (default: never)",
+    )
+    train.add_argument(
+        "--options",
+        default=None,
+        help="OptionBank file (torch.save) for --agent given-options, e.g. from "
+        "python -m skillchain_torch.agents.region_option OUT.pt",
+    )
+    train.add_argument(
+        "--options-agent",
+        type=_options_agent,
+        default=None,
+        metavar="N|each",
+        help="for --agent given-options: start every agent with saved agent N's options "
+        "(default 0), or 'each': agent p takes saved agent p's",
+    )
+    train.add_argument(
+        "--slots",
+        type=int,
+        default=None,
+        help="option slots per agent for --agent skill-chaining (default 12)",
+    )
+    train.add_argument(
+        "--initiation-bias",
+        type=float,
+        default=None,
+        help="intercept new initiation classifiers start from (default 0: true everywhere "
+        "until the first fit, which starts from zero)",
+    )
+    train.add_argument(
+        "--initiation-centered",
+        action="store_const",
+        const=True,
+        default=None,
+        help="initiation classifiers on features of 2s-1 instead of s",
+    )
+    train.add_argument(
+        "--gestation-positives",
+        type=int,
+        default=None,
+        metavar="N",
+        help="reading: each time a gestating option's target fires, the last N states of the "
+        "trajectory become positive examples (0: none; 250: the paper's 'within 250 steps')",
+    )
+    train.add_argument(
+        "--initiation-start",
+        choices=("everything", "biased", "fitted"),
+        default=None,
+        help="reading: the initiation set when gestation ends: true everywhere, true through "
+        "--initiation-bias, or fitted on the gestation positives",
+    )
+    train.add_argument(
+        "--initiation-constrain",
+        choices=("learned", "start"),
+        default=None,
+        help="reading: the 0.1 distance constraint once the set is learned, or from the end "
+        "of gestation",
+    )
+    train.add_argument(
+        "--wait-for-both-classes",
+        dest="one_class_fits",
+        action="store_const",
+        const=False,
+        default=None,
+        help="reading: fit an initiation set only once it holds both classes",
+    )
+    train.add_argument(
+        "--keep-negatives",
+        choices=("on", "off"),
+        default=None,
+        help="initiation-set stores never drop a failure to make room for a success's "
+        "positives",
+    )
+    train.add_argument(
+        "--intra-option-primitives",
+        choices=("on", "off"),
+        default=None,
+        help="the top level's primitive values also learn from the steps options take "
+        "(one-step Q-learning; default off: only from the agent's own primitive decisions, "
+        "as the paper's SMDP Sarsa)",
+    )
+    train.add_argument(
+        "--option-interruption",
+        choices=("on", "off"),
+        default=None,
+        help="an executing option stops where it is no longer the top level's greedy decision "
+        "(default off: options run to their end, as the paper's)",
+    )
+    train.add_argument(
+        "--failure-bootstrap",
+        choices=("decision", "primitives"),
+        default=None,
+        help="what a timed-out option execution's SMDP target bootstraps on: the next "
+        "decision (Sarsa, the paper) or the best primitive at s'",
+    )
+    train.add_argument(
+        "--policy-start",
+        choices=("zero", "top-level"),
+        default=None,
+        help="how a new option's policy starts when it joins: zero weights updated off-policy "
+        "in gestation, or the agent's own primitive values projected onto the option's basis",
+    )
+    train.add_argument(
+        "--value-start",
+        choices=("max-sample", "agent"),
+        default=None,
+        help="how Q(s, o) starts when an option joins: the best value sampled when its target "
+        "fired in gestation, everywhere (the paper), or the agent's own max_a Q(s, a) fitted in "
+        "its basis plus --value-bonus",
+    )
+    train.add_argument(
+        "--value-bonus",
+        type=float,
+        default=None,
+        help="added to Q(s, o) everywhere under --value-start agent (default 0)",
+    )
+    train.add_argument(
+        "--option-alpha",
+        type=float,
+        default=None,
+        help="the options' Q-learning step size after they join (default 0: an option keeps "
+        "the policy it joins with; the paper: 0.0005)",
+    )
+    train.add_argument(
+        "--gestation",
+        type=int,
+        default=None,
+        help="episodes a new option gestates before it can be chosen (default 2; the paper: 10)",
+    )
+    train.add_argument(
+        "--convergence-threshold",
+        type=float,
+        default=None,
+        help="an initiation set is learned, and becomes a target event, when its weights moved "
+        "less than this per episode twice in a row (default: the paper's 0.15)",
+    )
+    train.add_argument(
+        "--completion-reward",
+        type=float,
+        default=None,
+        help="added to an option's reward when its target fires (default 10000)",
+    )
+    train.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=None,
+        help="checkpoint every N episodes of the slowest agent (default 25)",
+    )
+    train.add_argument("--device", default=None, help="torch device (default cpu)")
+    train.add_argument(
+        "--threads", type=int, default=1, help="torch intra-op threads while training (default 1)"
+    )
+    train.add_argument("--out", type=Path, default=None, help="output directory")
+    train.add_argument(
+        "--resume",
+        type=Path,
+        metavar="DIR",
+        default=None,
+        help="continue the run in DIR from its last checkpoint",
+    )
+    train.add_argument(
+        "--overwrite", action="store_true", help="replace the outputs of a previous run in --out"
+    )
+    train.add_argument(
+        "--torch-only",
+        action="store_true",
+        help="run without the compiled agent kernels (slower; the same decisions, but sums "
+        "rounded in torch's order: bit for bit the runs of versions before them)",
+    )
+    train.add_argument("--quiet", action="store_true", help="no progress bar")
+    train.add_argument(
+        "--workers",
+        type=_positive,
+        default=None,
+        help="train the agents on N Ray workers in blocks, merged into --out bit for bit "
+        "(default 1: this process; needs pip install skillchain_torch[ray])",
+    )
+    train.add_argument(
+        "--block-size",
+        type=_block_size,
+        default=None,
+        metavar="B",
+        help="with --workers: agents per block, handed to workers as they free up, or "
+        "'shrink' (each block 1/(2N) of the agents left) (default: one block per worker, which "
+        "keeps the agents' steps batched)",
+    )
+    train.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDR",
+        help="with --workers: the Ray cluster to use (default: RAY_ADDRESS, else a local Ray "
+        "of N CPUs)",
+    )
+    summary = sub.add_parser("summarize", help="print the returns table of a finished run")
+    summary.add_argument("dir", type=Path, help="run directory")
+    reproduce = sub.add_parser(
+        "reproduce",
+        help="run the paper's experiments and write their figures and report",
+        description="Run the paper's experiments (flat, skill chaining and given options on "
+        "both Pinball instances), then write the figures (4a-8) and DIR/README.md. Resumable: "
+        "run it again to finish an interrupted study.",
+    )
+    reproduce.add_argument("what", choices=("paper",), help="the study to reproduce")
+    reproduce.add_argument("--out", type=Path, required=True, help="output directory")
+    reproduce.add_argument("--runs", type=_positive, default=100,
+                           help="runs per agent on the first instance (default 100)")
+    reproduce.add_argument("--episodes", type=_positive, default=250,
+                           help="episodes per run (default 250)")
+    reproduce.add_argument("--hard-runs", type=_positive, default=30,
+                           help="runs per agent on the second instance (default 30)")
+    reproduce.add_argument("--hard-episodes", type=_positive, default=None,
+                           help="episodes per run on the second instance (default: --episodes)")
+    reproduce.add_argument("--seed", type=int, default=1000,
+                           help="agent p of every kind uses seed + p (default 1000)")
+    reproduce.add_argument("--instances", nargs="+", choices=("simple", "hard"),
+                           default=["simple", "hard"], help="which instances (default both)")
+    reproduce.add_argument("--jobs", type=_positive, default=2,
+                           help="runs in parallel, one process each (default 2)")
+    reproduce.add_argument("--report-only", action="store_true",
+                           help="write the report and figures from the finished runs only")
+    reproduce.add_argument("--quiet", action="store_true", help="no progress bar")
+    verify = sub.add_parser(
+        "verify",
+        help="re-run agents of a finished run alone and compare them bit for bit",
+        description="Re-run the given agents of RUN_DIR one at a time from its config.json and "
+        "compare their returns and lengths with the run's arrays bit for bit. Exit 0 only if "
+        "every agent matches.",
+    )
+    verify.add_argument("dir", type=Path, help="run directory")
+    verify.add_argument("--agents", type=int, nargs="+", required=True, help="agent indices")
+    sweep = sub.add_parser(
+        "sweep",
+        help="run a grid of configurations on Ray and compare them",
+        description="Run every cell of SPEC's grid (agents x maps x TrainConfig fields x "
+        "seeds) as a run directory OUT/<cell>/, the cells' blocks of agents sharing one Ray "
+        "pool; complete cells are skipped on a re-run. Then write OUT/summary.md (window "
+        "means with 95% intervals) and OUT/summary.png. Needs pip install "
+        "skillchain_torch[ray].",
+    )
+    sweep.add_argument("spec", type=Path, help="sweep spec, TOML (or YAML with PyYAML)")
+    sweep.add_argument("--out", type=Path, default=None,
+                       help="output directory (default: the spec's out, else its name)")
+    sweep.add_argument("--workers", type=_positive, default=None,
+                       help="Ray workers (default: the spec's workers, else every CPU)")
+    sweep.add_argument("--block-size", type=_block_size, default=None, metavar="B",
+                       help="agents per block (default: one block per worker, as train --workers)")
+    sweep.add_argument("--ray-address", default=None, metavar="ADDR",
+                       help="the Ray cluster to use (default: RAY_ADDRESS, else a local Ray)")
+    sweep.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.commands = {"train": train, "summarize": summary, "reproduce": reproduce,
+                       "verify": verify, "sweep": sweep}
+    return parser
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _options_agent(text: str):
+    if text == "each":
+        return "each"
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an agent index or 'each', got {text!r}"
+        ) from None
+
+
+def _block_size(text: str) -> int | str:
+    """``--block-size``: a number of agents, or ``shrink``."""
+    if text == "shrink":
+        return text
+    try:
+        int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of agents or 'shrink', got "
+                                         f"{text!r}") from None
+    return _positive(text)

@@ -1,0 +1,172 @@
+"""What ``skillchain train`` writes for a run: the training loop with its TensorBoard log and
+progress bar, then the arrays, figures and ``run_info.json``.
+
+``OUTPUTS`` names every file a run may write (``--overwrite`` removes them, and only them);
+:func:`source_commit` is the code a run came from, read once as the process starts.
+
+Example:
+    >>> "returns.npy" in OUTPUTS and "checkpoints" in OUTPUTS
+    True
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import sys
+from pathlib import Path
+
+__all__ = ["OUTPUTS", "train_and_write", "source_commit", "write_discovery"]
+
+OUTPUTS = (
+    "returns.npy",
+    "lengths.npy",
+    "config.json",
+    "run_info.json",
+    "learning_curve.png",
+    "tb",
+    "checkpoints",
+    "options.pt",
+    "n_options.npy",
+    "option_tree.json",
+    "option_trajectory.png",
+    "diverged.json",  # a diverged run's returns so far (PopulationTrainer.DIVERGED_OUTPUTS)
+    "partial_returns.npy",
+    "partial_lengths.npy",
+    "blocks",  # a sharded run's (distributed.py): --overwrite must not reuse its blocks
+    "sharding.json",
+)
+
+
+def _interrupted(out: Path, every: int) -> str:
+    """What to do after Ctrl-C: resume from a checkpoint, or start again if none was written."""
+    from .checkpoint import latest_checkpoint
+
+    if latest_checkpoint(out) is not None:
+        return f"\ninterrupted; continue with: skillchain train --resume {out}"
+    when = f"every {every} episodes" if every else "disabled by --checkpoint-every 0"
+    return (f"\ninterrupted before the first checkpoint ({when}); nothing to resume, run the "
+            f"same command again with --overwrite")
+
+
+def train_and_write(trainer, out: Path, quiet: bool) -> int:
+    import torch
+
+    from .logging import TensorBoardHook
+    from .plots import save_learning_curve
+    from .progress import ProgressBar
+
+    tb = TensorBoardHook.for_run(trainer, out)
+    tb.register(trainer)
+    discovery = None
+    if getattr(trainer.agent, "discovery", None) is not None:
+        from .discovery_log import DiscoveryLog
+
+        discovery = DiscoveryLog(tb.logger)
+        discovery.register(trainer)
+    bar = ProgressBar(disable=quiet)
+    bar.register(trainer)
+    try:
+        trainer.train()
+    except KeyboardInterrupt:
+        bar.close()
+        tb.close()
+        print(_interrupted(out, trainer.config.checkpoint_every), file=sys.stderr)
+        return 130
+    except FloatingPointError:  # a learner diverged: _run reports it
+        bar.close()
+        tb.close()
+        raise
+    tb.close()
+    trainer.write_results(out)
+    if discovery is not None:
+        write_discovery(trainer, discovery, out)
+    cfg = trainer.config
+    save_learning_curve(
+        trainer.returns,
+        out / "learning_curve.png",
+        title=f"{cfg.agent} on {cfg.map} ({cfg.runs} runs)",
+    )
+    info = {
+        "wall_time_s": trainer.elapsed,
+        "agent_steps": trainer.agent_steps,
+        "agent_steps_per_second": trainer.steps_per_second(),
+        "torch": torch.__version__,
+        "threads": trainer.num_threads,
+        "compiled_agent": bool(getattr(trainer.agent, "native", False)),
+        "machine": platform.processor() or platform.machine(),
+        "commit": source_commit(),
+    }
+    (out / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")
+    if not quiet:
+        mean_last = float(trainer.returns[:, -1].mean())
+        print(
+            f"done: {trainer.agent_steps:,} agent steps in {trainer.elapsed:.1f} s "
+            f"({trainer.steps_per_second():,.0f}/s); mean return of the last episode "
+            f"{mean_last:,.1f}; outputs in {out}",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def source_commit() -> str | None:
+    """The git commit of the installed source (``+dirty`` when it has uncommitted changes),
+    or ``None`` outside a git checkout: recorded in ``run_info.json`` so a published run says
+    which code made it.
+
+    Read once per process, at the first call (``skillchain train`` calls it as it starts): a
+    run takes hours, and a commit made meanwhile is not the code it runs. A resumed run
+    records the commit of the invocation that finished it."""
+    global _COMMIT
+    if _COMMIT is _UNREAD:
+        _COMMIT = _read_commit()
+    return _COMMIT
+
+
+_UNREAD = object()
+_COMMIT: object = _UNREAD
+
+
+def _read_commit() -> str | None:
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
+                              text=True, timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--",
+                                "skillchain_torch", "envs", "trainers"], capture_output=True,
+                               text=True, timeout=10, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return head + ("+dirty" if dirty else "")
+
+
+def write_discovery(trainer, discovery, out: Path) -> None:
+    """``options.pt`` (every agent's bank), ``n_options.npy`` and ``option_tree.json``."""
+    import numpy as np
+
+    from .discovery_log import option_tree
+
+    trainer.agent.bank.save(out / "options.pt")
+    np.save(out / "n_options.npy", discovery.n_options)
+    (out / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent), indent=1) + "\n")
+    # Figure 4b: the best greedy solution through options, among the eight agents that hold
+    # the most options (ties: the best last return).
+    import torch
+
+    from .option_trajectory import best_greedy_trajectory, save_option_trajectory
+
+    held = trainer.agent.bank.live().sum(-1).cpu().numpy()
+    last = np.nan_to_num(trainer.returns[:, -1], nan=-np.inf)
+    order = sorted(range(len(held)), key=lambda p: (-held[p], -last[p]))[:8]
+    # The replays are many tiny torch calls: at torch's default threads they ran ~12x slower on
+    # a busy machine than at the trainer's one thread (a sharded run's workers draw at 1).
+    threads = torch.get_num_threads()
+    torch.set_num_threads(trainer.num_threads or threads)
+    try:
+        run = best_greedy_trajectory(trainer.agent, trainer.config.map, agents=order)
+    finally:
+        torch.set_num_threads(threads)
+    save_option_trajectory(run, trainer.config.map, out / "option_trajectory.png")
+
