@@ -433,18 +433,18 @@ class HierarchicalAgent(nn.Module):
         # Next top-level decision at s' (also the bootstrap decision d'). With intra-option
         # primitives or interruption, the rows inside an option value s' too.
         inside = stepped & executing
-        if self.intra_option_primitives or self.interruption:
-            valued = decision_ended | inside
-        else:
-            valued = decision_ended
+        values_inside = self.intra_option_primitives or self.interruption
         phi_next, d_next = self._choose(next_obs, phi_next, contains_next, u[:, :2],
-                                        rows=valued)  # fmt: skip
-        if self.intra_option_primitives or self.interruption:  # max_d Q(s', d)
+                                        rows=decision_ended | inside if values_inside
+                                        else decision_ended)  # fmt: skip
+        if values_inside:  # max_d Q(s', d)
             best = self.last_q.masked_fill(~self.last_available, -torch.inf).max(1).values
         if self.interruption:  # the option stops where it is no longer greedy
-            q_o = torch.where(self.last_available.gather(1, self.decision[:, None])[:, 0],
-                              self.last_q.gather(1, self.decision[:, None])[:, 0],
-                              self.q_head.q_value(phi_next, self.decision))
+            in_force = self.decision[:, None]
+            q_o = self.last_q.gather(1, in_force)[:, 0]  # valued above where available at s'
+            gone = (inside & ~self.last_available.gather(1, in_force)[:, 0]).nonzero()[:, 0]
+            if gone.numel() > 0:  # s' left the option's set: value it there
+                q_o = q_o.index_put((gone,), self.q_head.q_value(phi_next, self.decision, gone))
             decision_ended = decision_ended | (inside & ~decision_ended & (q_o < best))
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
