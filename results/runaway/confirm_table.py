@@ -4,7 +4,8 @@
 """
 import numpy as np
 
-WINDOWS = [(1, 10), (11, 25), (26, 50), (51, 100), (101, 150), (151, 200), (201, 250)]
+from skillchain_torch.trainers.paper_report import WINDOWS, diff_ci, mean_ci, window
+
 RUNS = {"flat o4": "results/paper/simple/flat",
         "sc o4": "results/paper/simple/skill-chaining",
         "flat o5": "results/runaway/confirm/flat-o5",
@@ -13,13 +14,12 @@ PAIRS = [("sc o4", "flat o4"), ("sc o5", "flat o5"), ("flat o5", "flat o4"), ("s
 
 
 def welch(a, b):
-    d = a.mean() - b.mean()
-    h = 1.96 * np.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b))
+    d, h = diff_ci(a, b)
     return f"{d:+,.0f} ± {h:,.0f}" + (" *" if abs(d) > h else "")
 
 
-def mean_ci(x):
-    return f"{x.mean():,.0f} ± {1.96 * x.std(ddof=1) / np.sqrt(len(x)):,.0f}"
+def fmt(x):
+    return "{:,.0f} ± {:,.0f}".format(*mean_ci(x))
 
 
 returns = {k: np.load(f"{v}/returns.npy")[:30] for k, v in RUNS.items()}
@@ -29,8 +29,8 @@ heads += [f"{a} - {b}".replace("sc", "skill chaining") for a, b in PAIRS]
 print("| episodes | " + " | ".join(heads) + " |")
 print("|---" * (len(heads) + 1) + "|")
 for a, b in WINDOWS:
-    m = {k: r[:, a - 1:b].mean(1) for k, r in returns.items()}
-    cells = [mean_ci(m[k]) for k in RUNS] + [welch(m[x], m[y]) for x, y in PAIRS]
+    m = {k: window(r, a, b) for k, r in returns.items()}
+    cells = [fmt(m[k]) for k in RUNS] + [welch(m[x], m[y]) for x, y in PAIRS]
     print(f"| {a}-{b} | " + " | ".join(cells) + " |")
 print()
 print("| run | over 10,000 steps after episode 50 | over 5,000 | longest after 50 | agent steps |")

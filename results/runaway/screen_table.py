@@ -7,12 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-WINDOWS = [(1, 10), (11, 25), (26, 50), (51, 100), (101, 150), (151, 200), (201, 250)]
-
-
-def half_width(x):
-    return 1.96 * x.std(ddof=1) / np.sqrt(len(x))
-
+from skillchain_torch.trainers.paper_report import WINDOWS, mean_ci, window
 
 heads = [f"{a}-{b}" for a, b in WINDOWS]
 heads += [">10k after 50", ">5k after 50", "longest after 50", "steps"]
@@ -24,8 +19,7 @@ for run in map(Path, sys.argv[1:]):
     returns, lengths = np.load(run / "returns.npy"), np.load(run / "lengths.npy")
     cells = []
     for a, b in WINDOWS:
-        m = returns[:, a - 1:b].mean(1)
-        cells.append(f"{m.mean():,.0f} ± {half_width(m):,.0f}")
+        cells.append("{:,.0f} ± {:,.0f}".format(*mean_ci(window(returns, a, b))))
     late = lengths[:, 50:]
     cells += [f"{(late > 10000).sum()}", f"{(late > 5000).sum()}", f"{late.max():,}",
               f"{lengths.sum() / 1e6:.1f}M"]
