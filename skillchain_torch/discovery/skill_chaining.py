@@ -362,16 +362,22 @@ class SkillChaining:
                 sample: Tensor) -> Tensor:  # fmt: skip
         bank = self.bank
         base_on, slot_on = event_list(bank, len(self.events), self.max_branching)
-        base_trig, slot_trig = base_trig & base_on, slot_trig & slot_on
-        if not (bool(base_trig.any()) or bool(slot_trig.any())):  # only unlisted events fired
+        # An agent whose slots are full creates nothing; once its first blocked creation is
+        # logged its triggers need no more work. (Late in a run every agent is full, and some
+        # agent enters a learned option's set at nearly every step.)
+        full = bank.full()
+        open_ = (~(full & self.slots_full_logged))[:, None]
+        base_trig, slot_trig = base_trig & base_on & open_, slot_trig & slot_on & open_
+        if not (bool(base_trig.any()) or bool(slot_trig.any())):  # nothing can be created
             return torch.zeros(bank.population, dtype=torch.bool, device=base_trig.device)
         base_cov, slot_cov = covered_start(bank, len(self.events), contains, option)
         create, target_event, parent = choose_creation(base_trig, slot_trig, base_cov, slot_cov)
         if not bool(create.any()):
             return create
-        full = bank.full()
         self._log_slots_full(create & full)
         create = create & ~full
+        if not bool(create.any()):
+            return create
         slot = bank.allocate(create, target_event=target_event, parent=parent,
                              episode=self.episode)  # fmt: skip
         new = slot_mask(create, slot, bank.slots)

@@ -394,6 +394,24 @@ def test_slots_full_logged_once(caplog):
     assert agent.bank.live()[0].sum() == 1
 
 
+def test_full_agent_stops_creating_work_once_logged(monkeypatch):
+    """Late in a run every agent is full and some trigger fires at nearly every step: after
+    the one ``slots_full`` record, triggers of a full agent must not reach ``allocate``."""
+    agent = make_agent(slots=1, events=(GoalEvent(), END))
+    k = add_option(agent, target_event=0)
+    half_plane(agent, k, 0.95)
+    calls = []
+    allocate = agent.bank.allocate
+    monkeypatch.setattr(agent.bank, "allocate",
+                        lambda *a, **kw: calls.append(1) or allocate(*a, **kw))
+    episode(agent, CORRIDOR, terminated=True, first=True)  # blocked: logged, still no allocate
+    assert calls == [] and agent.discovery.slots_full_logged.tolist() == [True]
+    for _ in range(3):
+        episode(agent, CORRIDOR, terminated=True)
+    assert calls == []
+    assert [e.kind for e in agent.discovery.log] == ["slots_full"]
+
+
 @pytest.mark.parametrize("overlap", [True, False])
 def test_state_dict_round_trip(overlap):
     agent = make_agent(overlap=overlap, events=(GoalEvent(), END))
