@@ -134,9 +134,10 @@ class SkillChainingAgent(HierarchicalAgent):
         self._starts = rows if self._starts is None else self._starts | rows
 
     def _begin_executions(self) -> None:
-        if self._starts is not None:
+        # (The compiled step reports its starts every step; most steps start none.)
+        if self._starts is not None and bool(self._starts.any()):
             self.discovery.start_executions(self._starts, self.option)
-            self._starts = None
+        self._starts = None
 
     def transition(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
                    truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:  # fmt: skip

@@ -111,21 +111,25 @@ static PyObject *exclude_overlap(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
-/* record(P, T, rows, step, obs, states): states[p, min(step[p], T - 1)] = obs[p] for rows. */
+/* record(P, T, rows, step, obs, states, ring): for each agent p in rows, the state obs[p] into
+ * states [P, T, 4]: at step min(step[p], T - 1) (ring 0: ExecutionTrace.record), or at
+ * step[p] % T, then step[p] += 1 (ring 1: RecentStates.record, the episode's last T states). */
 static PyObject *record(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, T;
     unsigned long long rows_p, step_p, obs_p, states_p;
-    if (!PyArg_ParseTuple(args, "nnKKKK", &P, &T, &rows_p, &step_p, &obs_p, &states_p))
+    int ring;
+    if (!PyArg_ParseTuple(args, "nnKKKKi", &P, &T, &rows_p, &step_p, &obs_p, &states_p, &ring))
         return NULL;
     const uint8_t *rows = (const uint8_t *)(uintptr_t)rows_p;
-    const int64_t *step = (const int64_t *)(uintptr_t)step_p;
+    int64_t *step = (int64_t *)(uintptr_t)step_p;
     const double *obs = (const double *)(uintptr_t)obs_p;
     double *states = (double *)(uintptr_t)states_p;
     for (Py_ssize_t p = 0; p < P; p++) {
         if (!rows[p]) continue;
-        int64_t t = step[p] < T - 1 ? step[p] : T - 1;
+        int64_t t = ring ? step[p] % T : (step[p] < T - 1 ? step[p] : T - 1);
         for (int j = 0; j < OBS_DIM; j++) states[(p * T + t) * OBS_DIM + j] = obs[p * OBS_DIM + j];
+        if (ring) step[p] += 1;
     }
     Py_RETURN_NONE;
 }
@@ -258,7 +262,7 @@ static PyMethodDef methods[] = {
     {"target_indicator", target_indicator, METH_VARARGS, "Each option's target at a state."},
     {"exclude_overlap", exclude_overlap, METH_VARARGS, "Memberships under the overlap rule."},
     {"event_list", event_list, METH_VARARGS, "The target events on each agent's list."},
-    {"record", record, METH_VARARGS, "Executing agents' states into the trace."},
+    {"record", record, METH_VARARGS, "Agents' states into the trace or the recent ring."},
     {"copy_slots", copy_slots, METH_VARARGS, "One option's weights per agent, kept or put back."},
     {"triggers", triggers, METH_VARARGS, "Entered events and gestation samples of a step."},
     {NULL, NULL, 0, NULL},

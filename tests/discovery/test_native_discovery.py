@@ -5,7 +5,7 @@ import doctest
 import pytest
 import torch
 
-from skillchain_torch.discovery import SkillChaining, native_discovery
+from skillchain_torch.discovery import RecentStates, SkillChaining, native_discovery
 from skillchain_torch.discovery.events import event_list, target_indicator
 from skillchain_torch.discovery.executions import ExecutionTrace
 from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion
@@ -68,6 +68,23 @@ def test_record_equals_torch(monkeypatch):
             trace.record(rows, step, obs)
     assert torch.equal(traces[0].states, traces[1].states)
     assert bool((traces[0].states != 0).any())
+
+
+@needs_native
+def test_recent_states_ring_equals_torch(monkeypatch):
+    rings = [RecentStates(20, 3) for _ in range(2)]
+    g = torch.Generator().manual_seed(4)
+    for t in range(11):  # past the ring's length, with episode restarts between
+        rows, restart = flags(20, t), flags(20, 100 + t, p=0.1)
+        obs = torch.rand(20, 4, dtype=torch.float64, generator=g)
+        for native, ring in zip((True, False), rings):
+            monkeypatch.setattr(native_discovery, "NATIVE", native)
+            ring.record(rows, obs)
+            ring.start_episodes(restart)
+    assert torch.equal(rings[0].states, rings[1].states)
+    assert torch.equal(rings[0].steps, rings[1].steps) and int(rings[0].steps.max()) > 3
+    assert all(torch.equal(a, b) for a, b in zip(rings[0].window(flags(20, 7), 3),
+                                                 rings[1].window(flags(20, 7), 3)))
 
 
 @needs_native
