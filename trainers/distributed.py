@@ -432,8 +432,6 @@ def _option_trajectory(run: ShardedRun, returns: np.ndarray) -> None:
     """``option_trajectory.png`` as a one-process run draws it: the best greedy solution among
     the eight agents holding the most options (ties: the best last return), each agent's
     candidates replayed on a worker from its block's last checkpoint."""
-    import ray
-
     from skillchain_torch.options import OptionBank
 
     from .option_trajectory import save_option_trajectory, solution_rank
@@ -441,13 +439,21 @@ def _option_trajectory(run: ShardedRun, returns: np.ndarray) -> None:
     held = OptionBank.load(run.out / "options.pt").live().sum(-1).numpy()
     last = np.nan_to_num(returns[:, -1], nan=-np.inf)
     order = sorted(range(len(held)), key=lambda p: (-held[p], -last[p]))[:8]
-    task = ray.remote(num_cpus=1)(block_trajectory)
-    refs = []
+    calls = []
     for p in order:  # the one-process order, so ties go to the same agent
         a, b = next(span for span in run.spans if span[0] <= p < span[1])
         cfg = block_config(run.config, a, b, run.block_dir((a, b)))
-        refs.append(task.remote(cfg, str(run.block_dir((a, b))), p - a, a))
-    best = max(ray.get(refs), key=solution_rank)
+        calls.append((cfg, str(run.block_dir((a, b))), p - a, a))
+    try:
+        import ray
+    except ImportError:
+        ray = None
+    if ray is not None and ray.is_initialized():  # replayed on the workers
+        task = ray.remote(num_cpus=1)(block_trajectory)
+        candidates = ray.get([task.remote(*call) for call in calls])
+    else:  # a merge in its own process (skillchain reproduce): one after the other
+        candidates = [block_trajectory(*call) for call in calls]
+    best = max(candidates, key=solution_rank)
     save_option_trajectory(best, run.config.map, run.out / "option_trajectory.png")
 
 

@@ -12,14 +12,22 @@ for skill chaining ``n_options.npy`` and ``option_tree.json``), under ``DIR/<ins
 =========================  ===================================================================
 
 Every agent of an instance uses the same seeds (``--seed``, agent p: seed + p), so the agents
-of different kinds are paired. Runs execute as separate processes, ``--jobs`` at a time (both
-cores of a 2-core machine by default); a given-options run waits for its skill-chaining run.
+of different kinds are paired. By the seed contract agents ``[a, b)`` of a run are the
+population run of ``b - a`` agents seeded ``seed + a``, bit for bit, so each run is cut into
+``--jobs`` blocks (:mod:`.distributed`'s layout: ``RUN_DIR/blocks/<a>-<b>/``), and blocks, not
+runs, are the jobs: ``--jobs`` processes at a time (both cores of a 2-core machine by default),
+the skill-chaining blocks first, as the given-options runs wait for their options. A run's
+blocks are merged (in a process of their own) into the files a one-process run writes. Whole
+runs as jobs left a core idle while one long skill-chaining run went on. ``DIR/timing.json``
+records each invocation's wall time.
 Then :mod:`.paper_report` writes ``DIR/README.md`` (tables with 95% intervals, the paper's
 claims checked) and the figures (4a-8, :mod:`.paper_figures`).
 
-Resumable: a finished run (``run_info.json``) is kept, an interrupted one continues from its
-last checkpoint, a run never started begins; a run directory whose config differs from the one
-asked for is refused by name. Each run's log is ``DIR/<instance>/<agent>.log``.
+Resumable: a finished run (``run_info.json``) is kept, an interrupted block continues from its
+last checkpoint, a finished block (``block.json``) is kept; a run directory whose config differs
+from the one asked for is refused by name. An interrupted run of an older, one-process study
+(a checkpoint in the run directory itself) is finished in one process. Each run's log is
+``DIR/<instance>/<agent>.log``.
 
 Example (a tiny version; the full one is ``--runs 100 --episodes 250``):
 
@@ -44,7 +52,7 @@ from pathlib import Path
 from .config import TrainConfig
 
 __all__ = ["Experiment", "paper_experiments", "run_state", "run_experiments", "train_dir",
-           "INSTANCES"]  # fmt: skip
+           "experiment_spans", "INSTANCES"]  # fmt: skip
 
 # The paper's two instances: map and the agents' shared settings.
 INSTANCES = {"simple": "pinball_simple_single", "hard": "pinball_hard_two_starts"}
@@ -146,70 +154,177 @@ def train_dir(run_dir: str | Path, quiet: bool = True, threads: int = 1) -> int:
     return _run(trainer, run_dir, quiet=quiet)
 
 
-def _launch(out: Path, name: str) -> subprocess.Popen:
+def experiment_spans(runs: int, jobs: int) -> list[tuple[int, int]]:
+    """A run's blocks: one per job (batched steps are worth more than balancing,
+    ``benchmarks/README.md``), as even as the agents allow.
+
+    Example:
+        >>> experiment_spans(100, 2), experiment_spans(3, 2), experiment_spans(1, 2)
+        ([(0, 50), (50, 100)], [(0, 2), (2, 3)], [(0, 1)])
+    """
+    from .distributed import block_spans
+
+    return block_spans(runs, -(-runs // max(1, min(jobs, runs))))
+
+
+@dataclass
+class _Job:
+    """A process to run: a block of an experiment, the merge of its blocks, or (``"run"``) an
+    older study's interrupted run, finished in one process."""
+
+    exp: Experiment
+    kind: str  # "block", "merge" or "run"
+    span: tuple[int, int] | None = None
+
+    @property
+    def label(self) -> str:
+        return self.exp.name + (f"[{self.span[0]}-{self.span[1]}]" if self.span else
+                                "" if self.kind == "run" else "[merge]")  # fmt: skip
+
+
+def _launch(out: Path, job: _Job, wall: float = 0.0, jobs: int = 2) -> subprocess.Popen:
     # From the study's folder, where the given-options runs' options paths are relative to.
-    cmd = [sys.executable, "-m", "skillchain_torch.trainers.reproduce", name]
-    handle = open(out / f"{name}.log", "a")
+    cmd = [sys.executable, "-m", "skillchain_torch.trainers.reproduce", job.exp.name]
+    if job.kind == "block":
+        cmd += ["--block", f"{job.span[0]}-{job.span[1]}"]
+    elif job.kind == "merge":
+        cmd += ["--merge", "--wall", f"{wall:.3f}", "--jobs", str(jobs)]
+    handle = open(out / f"{job.exp.name}.log", "a")
     handle.write(f"\n# {time.strftime('%Y-%m-%d %H:%M:%S')} (in {out}) {' '.join(cmd)}\n")
     handle.flush()
     return subprocess.Popen(cmd, stdout=handle, stderr=subprocess.STDOUT, cwd=out)
 
 
+def _jobs_of(exp: Experiment, out: Path, jobs: int) -> list[_Job]:
+    """What is left to do for ``exp`` (not done): its unfinished blocks, or its merge."""
+    from .checkpoint import latest_checkpoint
+    from .distributed import DONE, SHARDING, ShardedRun
+
+    run_dir = out / exp.name
+    if not (run_dir / SHARDING).is_file() and latest_checkpoint(run_dir) is not None:
+        return [_Job(exp, "run")]  # an older study's one-process run, interrupted
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if not (run_dir / "config.json").is_file():
+        exp.config.save_json(run_dir / "config.json")
+    if (run_dir / SHARDING).is_file():  # resumed: the blocks it was cut into
+        run = ShardedRun.load(run_dir, exp.config)
+    else:
+        run = ShardedRun(exp.config, run_dir, experiment_spans(exp.config.runs, jobs))
+        run.save(jobs)
+    left = [_Job(exp, "block", span) for span in run.spans
+            if not (run.block_dir(span) / DONE).is_file()]
+    return left or [_Job(exp, "merge")]
+
+
+def _finished(job: _Job, out: Path, code: int) -> bool:
+    from .distributed import DONE
+
+    if job.kind == "block":
+        a, b = job.span
+        return code == 0 and (out / job.exp.name / "blocks" / f"{a}-{b}" / DONE).is_file()
+    return code == 0 and run_state(out / job.exp.name) == "done"
+
+
+def _record_timing(out: Path, started: float, names: list[str], complete: bool) -> None:
+    """Append this invocation's wall time to ``out/timing.json``."""
+    path = out / "timing.json"
+    record = json.loads(path.read_text()) if path.is_file() else {"invocations": []}
+    seconds = time.time() - started
+    record["invocations"].append({
+        "started": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(started)),
+        "seconds": round(seconds, 1), "runs": names, "complete": complete})
+    record["seconds"] = round(sum(i["seconds"] for i in record["invocations"]), 1)
+    path.write_text(json.dumps(record, indent=1) + "\n")
+
+
 def run_experiments(experiments: list[Experiment], out: str | Path, jobs: int = 2,
                     quiet: bool = False, poll: float = 2.0) -> dict[str, str]:  # fmt: skip
-    """Run every experiment under ``out`` (``jobs`` processes at a time), skipping the finished
-    ones; returns each experiment's final state. A failed run stops its dependants and is
-    reported by name (``RuntimeError`` once the others are done)."""
+    """Run every experiment under ``out`` (blocks as jobs, ``jobs`` processes at a time),
+    skipping the finished ones; returns each experiment's final state. A failed block stops
+    its run and the run's dependants, reported by name (``RuntimeError`` once the others are
+    done)."""
     from tqdm import tqdm
+
+    from .distributed import record_driver_wall
 
     out = Path(out)
     for exp in experiments:  # refuse a mismatch before anything starts
         _check_config(exp, out / exp.name)
-    pending = [e for e in experiments if run_state(out / e.name) != "done"]
-    states = {e.name: "done" for e in experiments if e not in pending}
-    running: dict[str, subprocess.Popen] = {}
+    needed = {e.depends for e in experiments if e.depends}
+    # Runs that others wait for go first (a stable sort keeps the study's order otherwise).
+    waiting = sorted((e for e in experiments if run_state(out / e.name) != "done"),
+                     key=lambda e: e.name not in needed)  # fmt: skip
+    states = {e.name: "done" for e in experiments if run_state(out / e.name) == "done"}
+    queue: list[_Job] = []
+    left: dict[str, int] = {}  # jobs of each released experiment not finished yet
+    first: dict[str, float] = {}  # when its first job started in this invocation
+    running: dict[subprocess.Popen, _Job] = {}
     failed: list[str] = []
+    clock = time.time()
     bar = tqdm(total=len(experiments), initial=len(states), desc="paper runs", unit="run",
                disable=quiet, dynamic_ncols=True)  # fmt: skip
+
+    def release() -> None:
+        for exp in list(waiting):
+            dep = states.get(exp.depends) if exp.depends is not None else "done"
+            if dep == "failed":
+                waiting.remove(exp)
+                states[exp.name] = "failed"
+                failed.append(f"{exp.name} (its options' run {exp.depends} failed)")
+                bar.update(1)
+            elif dep == "done":
+                waiting.remove(exp)
+                todo = _jobs_of(exp, out, jobs)
+                left[exp.name] = len(todo)
+                queue.extend(todo)
+
     try:
-        while pending or running:
-            for name, proc in list(running.items()):
+        release()
+        while queue or running:
+            for proc, job in list(running.items()):
                 code = proc.poll()
                 if code is None:
                     continue
-                del running[name]
-                ok = code == 0 and run_state(out / name) == "done"
-                states[name] = "done" if ok else "failed"
-                if not ok:
-                    failed.append(f"{name} (exit {code}; see {out / name}.log)")
-                bar.update(1)
-            for exp in list(pending):
-                if len(running) >= jobs:
-                    break
-                if exp.depends is not None and states.get(exp.depends) != "done":
-                    if states.get(exp.depends) == "failed":
-                        pending.remove(exp)
-                        states[exp.name] = "failed"
-                        failed.append(f"{exp.name} (its options' run {exp.depends} failed)")
-                        bar.update(1)
+                del running[proc]
+                name = job.exp.name
+                if states.get(name) == "failed":
                     continue
-                run_dir = out / exp.name
-                run_dir.mkdir(parents=True, exist_ok=True)
-                if not (run_dir / "config.json").is_file():
-                    exp.config.save_json(run_dir / "config.json")
-                running[exp.name] = _launch(out, exp.name)
-                pending.remove(exp)
-            bar.set_postfix_str(", ".join(running) or "-")
+                if not _finished(job, out, code):
+                    states[name] = "failed"
+                    failed.append(f"{job.label} (exit {code}; see {out / name}.log)")
+                    queue[:] = [j for j in queue if j.exp.name != name]
+                    bar.update(1)
+                    continue
+                left[name] -= 1
+                if job.kind == "block" and left[name] == 0:  # merge next, before other blocks
+                    left[name] = 1
+                    queue.insert(0, _Job(job.exp, "merge"))
+                elif job.kind != "block":
+                    states[name] = "done"
+                    bar.update(1)
+            release()
+            while queue and len(running) < jobs:
+                job = queue.pop(0)
+                name = job.exp.name
+                first.setdefault(name, time.perf_counter())
+                wall = time.perf_counter() - first[name]
+                running[_launch(out, job, wall=wall, jobs=jobs)] = job
+            bar.set_postfix_str(", ".join(j.label for j in running.values()) or "-")
             if running:
                 time.sleep(poll)
     except KeyboardInterrupt:
-        for proc in running.values():
-            proc.send_signal(2)  # SIGINT: each run stops at a step and can be resumed
-        for proc in running.values():
+        for proc in running:
+            proc.send_signal(2)  # SIGINT: each block stops at a step and can be resumed
+        for proc in running:
             proc.wait()
         bar.close()
+        for name, start in first.items():  # the merge adds it to the run's wall time
+            if states.get(name) != "done" and (out / name / "sharding.json").is_file():
+                record_driver_wall(out / name, time.perf_counter() - start)
+        _record_timing(out, clock, sorted(first), complete=False)
         raise
     bar.close()
+    _record_timing(out, clock, sorted(first), complete=not failed)
     if failed:
         raise RuntimeError("runs failed: " + "; ".join(failed))
     return states
@@ -234,5 +349,34 @@ def reproduce_paper(out: str | Path, runs: int = 100, episodes: int = 250, hard_
     return out
 
 
-if __name__ == "__main__":  # one run directory, in its own process (run_experiments)
-    sys.exit(train_dir(sys.argv[1]))
+def _job_main(argv: list[str] | None = None) -> int:
+    """One job of :func:`run_experiments`, in its own process, from the study's folder:
+    ``RUN`` (an older study's one-process run), ``RUN --block a-b`` or ``RUN --merge``."""
+    import argparse
+
+    from .distributed import DONE, ShardedRun, block_config, merge_blocks, run_block
+
+    parser = argparse.ArgumentParser(prog="python -m skillchain_torch.trainers.reproduce")
+    parser.add_argument("run")
+    parser.add_argument("--block", default=None, help="a-b: train agents [a, b)")
+    parser.add_argument("--merge", action="store_true", help="merge the finished blocks")
+    parser.add_argument("--wall", type=float, default=0.0, help="seconds since the first block")
+    parser.add_argument("--jobs", type=int, default=2)
+    args = parser.parse_args(argv)
+    run_dir = Path(args.run)
+    if args.block is None and not args.merge:
+        return train_dir(run_dir)
+    config = TrainConfig.load_json(run_dir / "config.json")
+    if args.block is not None:
+        a, b = (int(x) for x in args.block.split("-"))
+        block_dir = run_dir / "blocks" / f"{a}-{b}"
+        run_block(block_config(config, a, b, block_dir), block_dir)
+        return 0
+    run = ShardedRun.load(run_dir, config)
+    records = {span: json.loads((run.block_dir(span) / DONE).read_text()) for span in run.spans}
+    merge_blocks(run, records, args.jobs, args.wall)
+    return 0
+
+
+if __name__ == "__main__":  # one job of run_experiments, in its own process
+    sys.exit(_job_main())

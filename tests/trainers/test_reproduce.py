@@ -27,6 +27,11 @@ def test_reproduce_resumes_and_its_runs_verify(tmp_path):
         assert np.load(run / "returns.npy").shape == (2, 3)
         assert json.loads((run / "config.json").read_text())["seed"] == 1000
         assert "commit" in json.loads((run / "run_info.json").read_text())
+    for agent in ("flat", "skill-chaining", "given-options"):  # blocks as jobs, one per core
+        assert sorted(p.name for p in (out / "simple" / agent / "blocks").iterdir()) == [
+            "0-1", "1-2"]
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["invocations"][0]["complete"] and len(timing["invocations"][0]["runs"]) == 3
     assert (out / "README.md").read_text().count("| claim |") == 1
     assert (out / "fig4a.png").is_file()
     stamp = (out / "simple" / "flat" / "run_info.json").stat().st_mtime
@@ -77,3 +82,26 @@ def test_figures_take_the_trained_agents_of_a_sharded_run_from_a_block(tmp_path)
     assert trainer.agent.population == dict(spans)[first] - first
     block, offset = trained_agents(out / "blocks" / "1-3")  # an ordinary run: its own agents
     assert offset == 0 and block.agent.population == 2
+
+
+def test_jobs_of_a_run_resume_where_it_stopped(tmp_path):
+    """A new run is cut into one block per job; finished blocks are skipped; once all are
+    done only the merge is left; an older study's interrupted one-process run stays whole."""
+    from skillchain_torch.trainers.reproduce import _jobs_of, paper_experiments
+
+    exp = paper_experiments(runs=5, episodes=2, instances=("simple",))[0]
+    jobs = _jobs_of(exp, tmp_path, jobs=2)
+    assert [(j.kind, j.span) for j in jobs] == [("block", (0, 3)), ("block", (3, 5))]
+    assert json.loads((tmp_path / exp.name / "sharding.json").read_text())["blocks"] == [
+        [0, 3], [3, 5]]
+    (tmp_path / exp.name / "blocks" / "0-3").mkdir(parents=True)
+    (tmp_path / exp.name / "blocks" / "0-3" / "block.json").write_text("{}")
+    assert [j.label for j in _jobs_of(exp, tmp_path, jobs=4)] == ["simple/flat[3-5]"]  # kept
+    (tmp_path / exp.name / "blocks" / "3-5").mkdir(parents=True)
+    (tmp_path / exp.name / "blocks" / "3-5" / "block.json").write_text("{}")
+    assert [j.kind for j in _jobs_of(exp, tmp_path, jobs=2)] == ["merge"]
+    old = tmp_path / "old"
+    (old / exp.name / "checkpoints").mkdir(parents=True)
+    exp.config.save_json(old / exp.name / "config.json")
+    (old / exp.name / "checkpoints" / "ckpt_000001.pt").write_bytes(b"")
+    assert [j.kind for j in _jobs_of(exp, old, jobs=2)] == ["run"]
