@@ -196,18 +196,19 @@ static PyObject *outcomes(PyObject *self, PyObject *args)
 
 /* triggers(P, K, E, parent, target_event, status, base_now, base_next, contains,
  * contains_next, reached, stepped, sample, gestation_q, max_branching, out_gestation_q,
- * out_base_trig, out_slot_trig, out_base_now) -> bool: for the stepped rows, the base events
- * and the LEARNED options' sets the transition entered (false at s, true at s'), and the
- * gestating options whose target it entered take max(their sample, sample[p]); returns
- * whether an event on its agent's list (see listed) was triggered: only those can create. */
+ * out_base_trig, out_slot_trig, out_base_now, out_hits) -> (bool, bool): for the stepped
+ * rows, the base events and the LEARNED options' sets the transition entered (false at s, true
+ * at s'), and the gestating options whose target it entered (out_hits) take max(their sample,
+ * sample[p]); returns whether an event on its agent's list (see listed) was triggered (only
+ * those can create) and whether any gestating option's target was entered. */
 static PyObject *triggers(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, E, max_branching;
     unsigned long long par_p, te_p, st_p, bn_p, bx_p, con_p, conx_p, reach_p, step_p, sam_p,
-        gq_p, ogq_p, obt_p, ost_p, obn_p;
-    if (!PyArg_ParseTuple(args, "nnnKKKKKKKKKKKnKKKK", &P, &K, &E, &par_p, &te_p, &st_p, &bn_p,
+        gq_p, ogq_p, obt_p, ost_p, obn_p, hit_p;
+    if (!PyArg_ParseTuple(args, "nnnKKKKKKKKKKKnKKKKK", &P, &K, &E, &par_p, &te_p, &st_p, &bn_p,
                           &bx_p, &con_p, &conx_p, &reach_p, &step_p, &sam_p, &gq_p,
-                          &max_branching, &ogq_p, &obt_p, &ost_p, &obn_p))
+                          &max_branching, &ogq_p, &obt_p, &ost_p, &obn_p, &hit_p))
         return NULL;
     uint8_t *base_on = (uint8_t *)malloc((size_t)(K + E + 1)), *slot_on = base_on + E;
     if (!base_on) return PyErr_NoMemory();
@@ -224,19 +225,21 @@ static PyObject *triggers(PyObject *self, PyObject *args)
     const double *gestation_q = (const double *)(uintptr_t)gq_p;
     double *out_gq = (double *)(uintptr_t)ogq_p;
     uint8_t *base_trig = (uint8_t *)(uintptr_t)obt_p, *slot_trig = (uint8_t *)(uintptr_t)ost_p;
-    uint8_t *out_base_now = (uint8_t *)(uintptr_t)obn_p;
-    int any = 0;
+    uint8_t *out_base_now = (uint8_t *)(uintptr_t)obn_p, *hits = (uint8_t *)(uintptr_t)hit_p;
+    int any = 0, any_hit = 0;
     for (Py_ssize_t p = 0; p < P; p++) {
         int go = stepped[p], fired = 0;
         const int64_t *par = parent + p * K, *te = target_event + p * K, *st = status + p * K;
         for (Py_ssize_t k = 0; k < K; k++) {
             Py_ssize_t s = p * K + k;
             double q = gestation_q[s];
-            if (go && st[k] == GESTATING && reached[s]
-                && !target_of(par, te, st, base_now + p * E, E, contains + p * K, k)) {
+            hits[s] = (uint8_t)(go && st[k] == GESTATING && reached[s]
+                                && !target_of(par, te, st, base_now + p * E, E, contains + p * K, k));
+            if (hits[s]) {
                 /* torch.maximum: NaN if either is NaN */
                 double x = sample[p];
                 q = (isnan(q) || isnan(x)) ? NAN : (x > q ? x : q);
+                any_hit = 1;
             }
             out_gq[s] = q;
             slot_trig[s] = (uint8_t)(go && !contains[s] && contains_next[s] && st[k] == LEARNED);
@@ -254,7 +257,7 @@ static PyObject *triggers(PyObject *self, PyObject *args)
         for (Py_ssize_t e = 0; e < E; e++) any |= base_trig[p * E + e] && base_on[e];
     }
     free(base_on);
-    return PyBool_FromLong(any);
+    return Py_BuildValue("(OO)", any ? Py_True : Py_False, any_hit ? Py_True : Py_False);
 }
 
 static PyMethodDef methods[] = {

@@ -145,11 +145,13 @@ def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Ten
              base_next: Tensor, contains: Tensor, contains_next: Tensor, reached: Tensor,
              stepped: Tensor, sample: Tensor, gestation_q: Tensor, max_branching: int,
              trig_out: tuple[Tensor, Tensor] | None = None,
-             ) -> tuple[Tensor, Tensor, Tensor, Tensor, bool]:  # fmt: skip
-    """One step's ``(gestation_q, base_trig, slot_trig, base_now, any_listed)`` of
+             ) -> tuple[Tensor, Tensor, Tensor, Tensor, bool, Tensor | None]:  # fmt: skip
+    """One step's ``(gestation_q, base_trig, slot_trig, base_now, any_listed, hits)`` of
     :meth:`~.skill_chaining.SkillChaining.after_transition` (new tensors, or ``trig_out``'s
     contiguous bool ``(base_trig [P, E], slot_trig [P, K])`` for the triggers); ``any_listed``:
-    an event on its agent's list (:func:`event_list`) was triggered, so a creation may follow."""
+    an event on its agent's list (:func:`event_list`) was triggered, so a creation may follow;
+    ``hits [P, K]``: the gestating options whose target the transition entered (``None`` when
+    there is none, the usual step)."""
     P, K = status.shape
     E = base_now.shape[1]
     parent, target_event, status = (x.contiguous() for x in (parent, target_event, status))
@@ -161,8 +163,10 @@ def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Ten
         trig_out = (torch.empty(P, E, dtype=torch.bool), torch.empty(P, K, dtype=torch.bool))
     base_trig, slot_trig = trig_out
     out_base_now = torch.empty(P, E, dtype=torch.bool)
-    any_listed = _c.triggers(P, K, E, parent.data_ptr(), target_event.data_ptr(), status.data_ptr(),
-                           *(x.data_ptr() for x in flags), sample.data_ptr(),
-                           gestation_q.data_ptr(), int(max_branching), out_q.data_ptr(),
-                           base_trig.data_ptr(), slot_trig.data_ptr(), out_base_now.data_ptr())
-    return out_q, base_trig, slot_trig, out_base_now, any_listed
+    hits = torch.empty(P, K, dtype=torch.bool)
+    any_listed, any_hit = _c.triggers(
+        P, K, E, parent.data_ptr(), target_event.data_ptr(), status.data_ptr(),
+        *(x.data_ptr() for x in flags), sample.data_ptr(), gestation_q.data_ptr(),
+        int(max_branching), out_q.data_ptr(), base_trig.data_ptr(), slot_trig.data_ptr(),
+        out_base_now.data_ptr(), hits.data_ptr())  # fmt: skip
+    return out_q, base_trig, slot_trig, out_base_now, any_listed, hits if any_hit else None

@@ -272,18 +272,20 @@ class SkillChaining:
         self._finish_executions(option, reached, duration, decision_ended & stepped,
                                 terminated)  # fmt: skip
         sample = value  # Q(s, d) of the decision in force
-        if self.recent is not None:  # before base_now moves on to s'
-            self._gestation_positives(self._gestation_hits(raw_now, reached, stepped))
         if native_discovery.applies(contains, stepped):  # the same rules, compiled
-            self.gestation_q, base_trig, slot_trig, self.base_now, any_listed = (
+            self.gestation_q, base_trig, slot_trig, self.base_now, any_listed, hits = (
                 native_discovery.triggers(bank.parent, bank.target_event, bank.status,
                                           self.base_now, self._base_next, raw_now,
                                           raw_next, reached, stepped, sample,
                                           self.gestation_q, self.max_branching,
                                           self._triggers_out))  # fmt: skip
+            if self.recent is not None and hits is not None:  # (the hits of _gestation_hits)
+                self._gestation_positives(hits)
             if not any_listed:  # only listed events create
                 return torch.zeros_like(stepped)
             return self._create(base_trig, slot_trig, contains, option, sample)
+        if self.recent is not None:  # before base_now moves on to s'
+            self._gestation_positives(self._gestation_hits(raw_now, reached, stepped))
         gestating = bank.status == OptionStatus.GESTATING
         if bool(gestating.any()):
             before = target_indicator(bank, self.base_now, raw_now)

@@ -5,7 +5,12 @@ import doctest
 import pytest
 import torch
 
-from skillchain_torch.discovery import RecentStates, SkillChaining, native_discovery
+from skillchain_torch.discovery import (
+    InitiationReading,
+    RecentStates,
+    SkillChaining,
+    native_discovery,
+)
 from skillchain_torch.discovery.events import event_list, target_indicator
 from skillchain_torch.discovery.executions import ExecutionTrace
 from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion
@@ -131,15 +136,22 @@ def test_snapshots_and_dropped_updates_equal_torch(head_kind, monkeypatch):
 
 
 @needs_native
-def test_after_transition_equals_torch(monkeypatch):
-    """Triggers, gestation samples and base events of a step, with the same creations."""
+@pytest.mark.parametrize("positives", [0, 3])
+def test_after_transition_equals_torch(positives, monkeypatch):
+    """Triggers, gestation samples and base events of a step, with the same creations (and
+    with a reading's gestation positives, the same examples)."""
     P, K = 40, 5
     results = []
     for native in (True, False):
         monkeypatch.setattr(native_discovery, "NATIVE", native)
         bank = random_bank(P, K, 1, seed=9)
         bank.status[:, -1] = int(OptionStatus.EMPTY)  # room to create
-        sc = SkillChaining(bank, max_option_steps=5)
+        sc = SkillChaining(bank, max_option_steps=5,
+                           reading=InitiationReading(gestation_positives=positives))
+        if positives:  # a few states of this episode behind each agent
+            for t in range(4):
+                sc.record_states(torch.ones(P, dtype=torch.bool),
+                                 torch.full((P, 4), 0.1 * t, dtype=torch.float64))
         sc.base_now = flags((P, 1), 4, 0.2)
         sc._base_next = flags((P, 1), 5, 0.3)
         sc.raw_now, sc.last_raw = flags((P, K), 7), flags((P, K), 8)  # own sets at s, s'
@@ -150,11 +162,15 @@ def test_after_transition_equals_torch(monkeypatch):
                 -1, 1, P, dtype=torch.float64),
             reached=flags((P, K), 10), duration=torch.ones(P, dtype=torch.int64),
             decision_ended=flags(P, 11), terminated=flags(P, 12, 0.1), stepped=flags(P, 13, 0.8))
+        clf = bank.classifier
         results.append((created, sc.gestation_q, sc.base_now, bank.status.clone(),
-                        bank.parent.clone(), bank.target_event.clone()))
+                        bank.parent.clone(), bank.target_event.clone(), clf.count.clone(),
+                        clf.examples.clone(), clf.labels.clone()))
     for a, b in zip(*results):
         assert torch.equal(a, b)
     assert bool(results[0][0].any())  # options were created
+    if positives:  # gestating options' targets were hit: their positives were stored
+        assert int(results[0][6].sum()) > 3 * int(results[0][0].sum())
     assert not torch.equal(results[0][1], torch.randn(P, K, dtype=torch.float64,
                                                       generator=torch.Generator().manual_seed(6)))
 
@@ -170,7 +186,7 @@ def test_triggers_report_only_events_on_the_list():
     zeros, goal = torch.zeros(P, 1, dtype=torch.bool), torch.ones(P, 1, dtype=torch.bool)
     no = torch.zeros(P, K, dtype=torch.bool)
     for stepped, expected in (([True, False], False), ([True, True], True)):
-        *_, any_listed = native_discovery.triggers(
+        *_, any_listed, _ = native_discovery.triggers(
             bank.parent, bank.target_event, bank.status, zeros, goal, no, no, no,
             torch.tensor(stepped), torch.zeros(P, dtype=torch.float64),
             torch.zeros(P, K, dtype=torch.float64), max_branching=3)  # fmt: skip
