@@ -30,6 +30,8 @@ from typing import Any
 
 from skillchain_torch.discovery.readings import DEFAULT_READING as _DEFAULT
 from skillchain_torch.discovery.readings import InitiationReading
+from skillchain_torch.resources import available_memory, device_problem
+from skillchain_torch.resources import format_bytes as _size
 
 __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "RESUME_FIELDS",
            "LEGACY_FIELDS", "UNREAD_FIELDS", "INT64_MAX"]
@@ -110,85 +112,11 @@ def _type_problem(kind: str, value: Any) -> str | None:
     return None if ok else what + (" or null" if optional else "")
 
 
-def _size(n: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"):
-        if n < 1024 or unit == "EiB":
-            return f"{n:,.0f} {unit}" if unit == "B" else f"{n:,.1f} {unit}"
-        n /= 1024
-    raise AssertionError  # pragma: no cover
-
-
-def available_memory(device: str = "cpu") -> int | None:
-    """Bytes of memory a new run can use now: ``MemAvailable`` (and the cgroup's limit) on
-    Linux, ``psutil`` elsewhere, the free CUDA memory for a CUDA device; ``None`` if unknown."""
-    import torch
-
-    dev = torch.device(device)
-    if dev.type == "cuda":
-        try:
-            return int(torch.cuda.mem_get_info(dev)[0])
-        except Exception:  # noqa: BLE001 - unknown is fine: no check
-            return None
-    if dev.type != "cpu":
-        return None
-    found = []
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    found.append(int(line.split()[1]) * 1024)
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
-        used = Path("/sys/fs/cgroup/memory.current").read_text().strip()
-        if limit != "max":
-            found.append(max(int(limit) - int(used), 0))
-    except (OSError, ValueError):
-        pass
-    if not found:
-        try:
-            import psutil
-
-            found.append(int(psutil.virtual_memory().available))
-        except Exception:  # noqa: BLE001 - no psutil: try sysconf
-            try:
-                found.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-            except (AttributeError, ValueError, OSError):
-                return None
-    return min(found)
-
-
 def _check_device(device: str) -> None:
     """``ConfigError`` unless ``device`` names a torch device this machine has."""
-    import torch
-
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, ValueError, TypeError):
-        raise ConfigError(f"device must be a torch device such as cpu, cuda or cuda:0, got "
-                          f"{device!r}", ("device",)) from None
-    if dev.type == "cuda":
-        if not torch.cuda.is_available():
-            build = (f"CUDA {torch.version.cuda}" if torch.version.cuda
-                     else "a CPU-only build")  # fmt: skip
-            raise ConfigError(f"device {device!r} is not available: torch {torch.__version__} "
-                              f"({build}) sees no CUDA device; use cpu", ("device",))
-        count = torch.cuda.device_count()
-        if dev.index is not None and dev.index >= count:
-            raise ConfigError(f"device {device!r} is not available: this machine has {count} "
-                              f"CUDA device(s), cuda:0 to cuda:{count - 1}", ("device",))
-    elif dev.type == "meta":
-        raise ConfigError("device 'meta' holds no data (shapes only); use cpu or cuda",
-                          ("device",))
-    elif dev.type != "cpu":
-        try:
-            torch.zeros(1, device=dev)
-        except Exception as err:  # noqa: BLE001 - torch raises many types for absent devices
-            text = " ".join(str(err).split()) or type(err).__name__
-            first = text.split(". ")[0][:120]
-            raise ConfigError(f"device {device!r} is not available here ({first})",
-                              ("device",)) from None
+    problem = device_problem(device)
+    if problem is not None:
+        raise ConfigError(problem, ("device",))
 
 
 @dataclass(frozen=True)

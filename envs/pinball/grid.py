@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import torch
 
+from skillchain_torch.resources import available_memory
+
 from .maps import PinballMap
 
 __all__ = [
@@ -132,18 +134,6 @@ def grid_memory_estimate(pinball_map: PinballMap, resolution: int = 128) -> tupl
     return nbytes, entries
 
 
-def _available_memory() -> int | None:
-    """``MemAvailable`` of /proc/meminfo in bytes, or None where it cannot be read."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
-
-
 def check_grid_size(
     pinball_map: PinballMap, resolution: int = 128, max_bytes: int | None = None
 ) -> None:
@@ -163,7 +153,7 @@ def check_grid_size(
     """
     limit = MAX_GRID_BYTES if max_bytes is None else int(max_bytes)
     why = f"the limit, grid.MAX_GRID_BYTES = {limit / 2**30:.3g} GiB"
-    available = _available_memory()
+    available = available_memory("cpu")  # MemAvailable, and the cgroup's limit
     if available is not None and available < limit:
         limit, why = available, f"the memory available now ({available / 2**30:.3g} GiB)"
     nbytes, entries = grid_memory_estimate(pinball_map, resolution)
