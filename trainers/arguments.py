@@ -309,8 +309,8 @@ def build_parser() -> argparse.ArgumentParser:
                            help="runs per agent on the first instance (default 100)")
     reproduce.add_argument("--episodes", type=_positive, default=250,
                            help="episodes per run (default 250)")
-    reproduce.add_argument("--hard-runs", type=_positive, default=30,
-                           help="runs per agent on the second instance (default 30)")
+    reproduce.add_argument("--hard-runs", type=_positive, default=60,
+                           help="runs per agent on the second instance (default 60)")
     reproduce.add_argument("--hard-episodes", type=_positive, default=None,
                            help="episodes per run on the second instance (default: --episodes)")
     reproduce.add_argument("--seed", type=int, default=1000,

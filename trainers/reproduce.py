@@ -77,7 +77,7 @@ class Experiment:
         return self.name.split("/")[1]
 
 
-def paper_experiments(runs: int = 100, episodes: int = 250, hard_runs: int = 30,
+def paper_experiments(runs: int = 100, episodes: int = 250, hard_runs: int = 60,
                       hard_episodes: int | None = None, seed: int = 1000,
                       instances=("simple", "hard"), **reading) -> list[Experiment]:  # fmt: skip
     """The paper's runs: flat, skill chaining and given options on each instance.
@@ -330,7 +330,7 @@ def run_experiments(experiments: list[Experiment], out: str | Path, jobs: int = 
     return states
 
 
-def reproduce_paper(out: str | Path, runs: int = 100, episodes: int = 250, hard_runs: int = 30,
+def reproduce_paper(out: str | Path, runs: int = 100, episodes: int = 250, hard_runs: int = 60,
                     hard_episodes: int | None = None, seed: int = 1000, jobs: int = 2,
                     instances=("simple", "hard"), quiet: bool = False,
                     report: bool = True) -> Path:  # fmt: skip
