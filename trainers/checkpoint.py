@@ -38,7 +38,7 @@ from pathlib import Path
 
 import torch
 
-from skillchain_torch.options.bank import content_digest, read_torch_file
+from skillchain_torch.options.io import content_digest, read_torch_file
 
 from .config import TrainConfig
 
@@ -65,7 +65,7 @@ class DamagedCheckpoint(ValueError):
 
 def payload_digest(state: dict) -> str:
     """The sha256 (hex) of ``state`` without its ``sha256`` field (see
-    :func:`~skillchain_torch.options.bank.content_digest`)."""
+    :func:`~skillchain_torch.options.io.content_digest`)."""
     return content_digest({k: v for k, v in state.items() if k != CHECKSUM})
 
 

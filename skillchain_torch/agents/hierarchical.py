@@ -65,7 +65,13 @@ from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.native import check_same_kernels
 from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate, discount
-from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
+from skillchain_torch.options import (
+    FourierOptionQHead,
+    GoalEvent,
+    InitiationClassifier,
+    OptionBank,
+    TerminationPredicate,
+)
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
 
@@ -102,6 +108,8 @@ def shared_fourier_columns(basis: FourierBasis, q_head) -> Tensor | None:
         (torch.Size([256]), [0, 1, 2])
     """
     inner = getattr(q_head, "basis", None)
+    if type(q_head) is not FourierOptionQHead:  # a subclass may encode its own way
+        return None
     if (not isinstance(inner, FourierBasis) or inner.dim != basis.dim
             or inner.order > basis.order or inner.coefficients.dtype != basis.coefficients.dtype
             or inner.coefficients.device != basis.coefficients.device):  # fmt: skip
@@ -191,7 +199,14 @@ class HierarchicalAgent(nn.Module):
         device = torch.device(bank.status.device if device is None else device)
         self.bank = bank.to(device)
         self.native = _native.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES)
-        self.bank.classifier.set_native(self.native)  # memberships and refits go with it
+        # Memberships and refits go with the step where the classifier is the built-in one;
+        # a classifier of the user's own keeps its torch path under a compiled step (and
+        # native=True asks it for C, which it refuses, naming itself).
+        classifier = self.bank.classifier
+        if type(classifier) is InitiationClassifier:
+            classifier.set_native(self.native)
+        elif hasattr(classifier, "set_native"):
+            classifier.set_native(bool(native) and self.native)
         self.population, self.slots = bank.population, bank.slots
         self.num_decisions = NUM_PRIMITIVES + self.slots
         self.order = int(order)

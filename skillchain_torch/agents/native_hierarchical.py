@@ -46,6 +46,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from skillchain_torch.backends.select import builtin_type_problems, compiled
 from skillchain_torch.options import FourierOptionQHead, OptionStatus, native_initiation
 
 try:
@@ -83,25 +84,29 @@ def act(w: Tensor, code: Tensor, rows: Tensor, decision: Tensor, option: Tensor,
     return action
 
 
-def resolve(bank, native: bool | None, completion_reward, num_primitives: int) -> bool:
+def resolve(bank, native: bool | None, completion_reward, num_primitives: int,
+            pieces: dict | None = None) -> bool:
     """The agent's ``native`` argument made a choice for ``bank``'s options: ``None`` is
     ``True`` where the compiled path applies; ``True`` where it does not raises
-    ``ValueError`` naming what is missing."""
-    f64 = torch.float64
-    fourier = isinstance(bank.q_head, FourierOptionQHead)
+    ``ValueError`` naming what is missing (:func:`~skillchain_torch.backends.compiled`).
+
+    The step replaces the option heads' and the top level's maths, so it runs only where the
+    option head is exactly :class:`FourierOptionQHead` and every piece in ``pieces``
+    (``{name: (piece, built-in class)}``, the agent's top-level head and basis) is exactly its
+    built-in class. The initiation sets are not replaced (their memberships reach the step
+    from torch); the classifier chooses its own kernels (``InitiationClassifier.set_native``).
+    """
+    head = bank.q_head
+    exact = type(head) is FourierOptionQHead
     needs = {
-        "the compiled kernels": AVAILABLE and native_initiation.AVAILABLE,
+        "the compiled kernels (built)": AVAILABLE and native_initiation.AVAILABLE,
         "the CPU": bank.status.device.type == "cpu",
-        "Fourier option heads": fourier,
-        f"{num_primitives} option actions": bank.q_head.num_actions == num_primitives,
-        "float64 option heads and classifier": (not fourier or bank.q_head.weight.dtype == f64)
-        and bank.classifier.weight.dtype == f64,
+        f"{num_primitives} option actions": head.num_actions == num_primitives,
+        "float64 option heads": not exact or head.weight.dtype == torch.float64,
         "a float completion_reward": not isinstance(completion_reward, Tensor),
     }
-    missing = [name for name, ok in needs.items() if not ok]
-    if native and missing:
-        raise ValueError(f"native=True needs {', '.join(missing)}")
-    return not missing if native is None else bool(native)
+    pieces = {"the option head": (head, FourierOptionQHead), **(pieces or {})}
+    return compiled(native, needs, builtin_type_problems(pieces))
 
 
 # The agent's per-step state, in the order the C step reads and writes it.

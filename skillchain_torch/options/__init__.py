@@ -11,6 +11,8 @@ The pieces (paper sections 2, 4 and 5.1), each batched over ``[P, K]`` (agents x
 - Termination predicates: :class:`GoalEvent`, :class:`RegionEvent`, :class:`InitiationSetEvent`,
   :class:`LambdaEvent`.
 - :class:`OptionBank`: bundles the above with per-slot metadata; save / load / select agents.
+  A part of the user's own class loads once registered (:func:`register_q_head`,
+  :func:`register_classifier`).
 
 The intra-option Q-learning update lives in
 :class:`skillchain_torch.objectives.IntraOptionQLearning`.
@@ -19,6 +21,7 @@ The intra-option Q-learning update lives in
 from skillchain_torch.options.bank import FORMAT_VERSION, OptionBank
 from skillchain_torch.options.examples import reservoir_uniform, store_places
 from skillchain_torch.options.initiation import InitiationClassifier
+from skillchain_torch.options.io import register_classifier, register_q_head
 from skillchain_torch.options.logistic import logistic_sweeps
 from skillchain_torch.options.q_head import (
     FourierOptionQHead,
@@ -48,6 +51,8 @@ __all__ = [
     "RegionEvent",
     "TerminationPredicate",
     "logistic_sweeps",
+    "register_classifier",
+    "register_q_head",
     "reservoir_uniform",
     "slot_mask",
     "store_places",

@@ -24,19 +24,25 @@ Example:
 
 from __future__ import annotations
 
-import hashlib
-import math
 import os
-import warnings
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import torch
 from torch import Tensor, nn
 
 from skillchain_torch.options.initiation import InitiationClassifier
-from skillchain_torch.options.q_head import FourierOptionQHead, MLPOptionQHead, OptionQHead
+from skillchain_torch.options.io import (
+    CLASSIFIERS,
+    Q_HEADS,
+    Unregistered,
+    _check_finite,
+    _NonFinite,
+    content_digest,
+    lookup,
+    read_torch_file,
+)
+from skillchain_torch.options.q_head import FourierOptionQHead, OptionQHead
 from skillchain_torch.options.status import (
     OptionStatus,
     agent_index,
@@ -47,83 +53,7 @@ from skillchain_torch.options.termination import TerminationPredicate
 
 FORMAT = "skillchain_torch.OptionBank"
 FORMAT_VERSION = 1
-Q_HEADS: dict[str, type[OptionQHead]] = {
-    "FourierOptionQHead": FourierOptionQHead,
-    "MLPOptionQHead": MLPOptionQHead,
-}
 _METADATA = ("status", "target_event", "parent", "created_episode")
-_ZIP, _PICKLE = b"PK\x03\x04", b"\x80"  # how torch.save's files (zip, legacy pickle) start
-
-
-def read_torch_file(path: str | os.PathLike, what: str) -> Any:
-    """``torch.load(path, weights_only=True)`` on the CPU; every failure is a ``ValueError`` of
-    one line, ``"{path}: not a readable {what} ({reason})"``, that says what the file is
-    instead (missing, a directory, empty, not a torch file, truncated or damaged, or holding
-    Python objects a weights-only load refuses). Torch's own warnings are not shown."""
-    path = Path(path)
-    head: bytes | None = None
-    if not path.exists():
-        reason = "no such file"
-    elif path.is_dir():
-        reason = "it is a directory"
-    else:
-        try:
-            with open(path, "rb") as f:
-                head = f.read(4)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                return torch.load(path, map_location="cpu", weights_only=True)
-        except Exception as error:  # torch raises many types for truncated or foreign files
-            reason = _unreadable(head, error)
-    raise ValueError(f"{path}: not a readable {what} ({reason})")
-
-
-def content_digest(value: Any) -> str:
-    """The sha256 (hex) of a saved structure: each tensor's dtype, shape and bytes (on the
-    CPU), each plain value's type and ``repr``, dicts and sequences in order. Equal for the
-    structure saved and the one ``torch.load`` gives back, so it detects altered files."""
-    digest = hashlib.sha256()
-    _feed(digest, value)
-    return digest.hexdigest()
-
-
-def _feed(digest, value: Any) -> None:
-    if isinstance(value, Tensor):
-        t = value.detach().cpu().contiguous()
-        digest.update(f"T{t.dtype}{tuple(t.shape)}|".encode())
-        if t.numel():
-            digest.update(t.reshape(-1).view(torch.uint8).numpy())
-    elif isinstance(value, dict):
-        digest.update(f"D{len(value)}|".encode())
-        for key, item in value.items():
-            _feed(digest, key)
-            _feed(digest, item)
-    elif isinstance(value, (list, tuple)):
-        digest.update(f"L{len(value)}|".encode())
-        for item in value:
-            _feed(digest, item)
-    else:  # None, bool, int, float, str
-        text = repr(value)
-        digest.update(f"{type(value).__name__}{len(text)}|{text}".encode())
-
-
-def _unreadable(head: bytes | None, error: Exception) -> str:
-    """Why ``torch.load`` failed, in one short line."""
-    first = " ".join(str(error).split(". ")[0].split())[:160] or type(error).__name__
-    if head is None:
-        return first
-    if not head:
-        return "the file is empty"
-    if not head.startswith((_ZIP, _PICKLE)):
-        return f"not a torch file: it starts with {head!r}"
-    text = str(error)
-    if "Unsupported global" in text:
-        name = text.split("Unsupported global:", 1)[1].split()[1:2]
-        return (f"it holds Python objects ({', '.join(name) or 'a global'}) that a weights-only "
-                f"load refuses")  # fmt: skip
-    if "Weights only load failed" in text:  # e.g. a plain pickle, not torch.save's format
-        return "not a torch file, or a damaged one: the unpickler refused it"
-    return f"a truncated or damaged torch file: {first}"
 
 
 class OptionBank(nn.Module):
@@ -352,7 +282,8 @@ class OptionBank(nn.Module):
             "population": self.population,
             "slots": self.slots,
             "q_head": {"class": type(self.q_head).__name__, "config": dict(self.q_head.config)},
-            "classifier": {"config": dict(self.classifier.config)},
+            "classifier": {"class": type(self.classifier).__name__,
+                           "config": dict(self.classifier.config)},
             "environment": self.environment(),
             "features": self.feature_settings(),
             "state": {k: v.detach().cpu() for k, v in self.state_dict().items()},
@@ -391,15 +322,19 @@ class OptionBank(nn.Module):
         try:
             population, slots = int(payload["population"]), int(payload["slots"])
             if q_head is None:
-                head_class = Q_HEADS[payload["q_head"]["class"]]
+                head_class = lookup(Q_HEADS, payload["q_head"]["class"], "option head",
+                                    "register_q_head")  # fmt: skip
                 q_head = head_class(**payload["q_head"]["config"], device=device)
-            if classifier is None:
-                classifier = InitiationClassifier(**payload["classifier"]["config"],
-                                                  device=device)  # fmt: skip
+            if classifier is None:  # files saved before classifiers had a class name: the built-in
+                name = payload["classifier"].get("class", "InitiationClassifier")
+                kind = lookup(CLASSIFIERS, name, "initiation classifier", "register_classifier")
+                classifier = kind(**payload["classifier"]["config"], device=device)
             bank = cls(population, slots, q_head, classifier)
             state = payload["state"]
             _check_finite(state, population)
             bank.load_state_dict(state)
+        except Unregistered as error:
+            raise ValueError(f"{path}: {error}") from None
         except _NonFinite as error:
             raise ValueError(f"{path}: {error}; a diverged bank is not loaded") from None
         except (KeyError, TypeError, RuntimeError, ValueError, AttributeError, IndexError,
@@ -440,25 +375,3 @@ class OptionBank(nn.Module):
 
     def extra_repr(self) -> str:
         return f"population={self.population}, slots={self.slots}"
-
-
-class _NonFinite(ValueError):
-    pass
-
-
-def _check_finite(state: dict, population: int) -> None:
-    """``_NonFinite`` naming the first floating tensor of ``state`` with NaN or inf values."""
-    for key, value in state.items():
-        if not (isinstance(value, Tensor) and value.is_floating_point()):
-            continue
-        if math.isfinite(float(value.sum())):  # one pass when all is well
-            continue
-        bad = ~torch.isfinite(value)
-        if not bool(bad.any()):  # a finite sum that overflowed
-            continue
-        where = ""
-        if value.dim() >= 1 and value.shape[0] == population:
-            agents = bad.reshape(population, -1).any(-1).nonzero().flatten().tolist()
-            where = f" (agents {agents})"
-        raise _NonFinite(f"tensor {key!r} holds {int(bad.sum())} NaN or infinite "
-                         f"values{where}")  # fmt: skip

@@ -26,11 +26,13 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.backends.select import builtin_type_problems, compiled
 from skillchain_torch.features import PolynomialFeatures
 from skillchain_torch.invariant import rowwise_dot, rowwise_sum
 from skillchain_torch.native import for_c
-from skillchain_torch.options import native_initiation
-from skillchain_torch.options.examples import REPLACEMENTS, store_places
+from skillchain_torch.options import initiation_fit, native_initiation
+from skillchain_torch.options.example_store import ExampleStores
+from skillchain_torch.options.examples import REPLACEMENTS
 from skillchain_torch.options.logistic import logistic_sweeps
 from skillchain_torch.options.q_head import _DTYPES, OBS_DIM, dtype_name
 from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask, slot_mask
@@ -38,7 +40,7 @@ from skillchain_torch.options.status import agent_index, agent_seeds, check_slot
 _POINTS_CHUNK = 8192  # points per membership evaluation (bounds the [N, M] distance matrix)
 
 
-class InitiationClassifier(nn.Module):
+class InitiationClassifier(ExampleStores, nn.Module):
     """Population-batched logistic-regression initiation sets with bounded example stores.
 
     Args:
@@ -95,6 +97,15 @@ class InitiationClassifier(nn.Module):
     ``count`` (stored), ``seen`` (ever added), ``generation`` (resets), ``sweeps_done``,
     ``trained`` (fitted at least once; untrained slots contain everything), ``constrained``
     (distance constraint on), ``dirty`` (data added since the last fit), ``seeds [P]``.
+
+    **Your own model.** A subclass that overrides :meth:`logit` (``obs [P, *B, D] ->
+    [P, *B, K]``, e.g. through an ``nn.Module`` of its own) is honoured everywhere: membership
+    runs its logit on every path (the compiled one serves only this exact class), :meth:`fit`
+    trains its ``requires_grad`` parameters by :meth:`make_optimizer` (SGD at ``lr``, default)
+    on the same stores and loss, the convergence test compares its logits on fixed probe
+    points (:meth:`snapshot`), images use it, and :meth:`OptionBank.load` rebuilds it once it is
+    registered (:func:`~skillchain_torch.options.register_classifier`). See
+    :mod:`skillchain_torch.options.initiation_fit`.
     """
 
     def __init__(
@@ -126,6 +137,7 @@ class InitiationClassifier(nn.Module):
         if not dims or any(d < 0 or d >= OBS_DIM for d in dims):
             raise ValueError(f"distance_dims must be indices of the 4-d observation, got {dims}")
         self.population, self.slots, self.capacity = population, slots, capacity
+        self.obs_dim = OBS_DIM
         self.lr, self.sweeps, self.distance = float(lr), int(sweeps), float(distance)
         self.distance_dims, self.replacement = dims, replacement
         self.balanced = bool(balanced)
@@ -157,23 +169,22 @@ class InitiationClassifier(nn.Module):
 
     def set_native(self, native: bool | None = None) -> bool:
         """Use the compiled :func:`contains` and fits (:mod:`.native_initiation`) or not;
-        ``None``: when they are built and the classifier is on the CPU in float64. Their sums
+        ``None``: when they are built, the classifier is exactly this class (a subclass may
+        change any rule, which C would not run) and it is on the CPU in float64. Their sums
         run in an order of their own (rounding-level differences from the torch path).
-        Returns the choice.
+        Returns the choice; ``True`` where it cannot apply raises ``ValueError`` naming why.
 
         Example:
             >>> clf = InitiationClassifier(population=1, slots=2, capacity=8)
             >>> clf.set_native(False), clf.native
             (False, False)
         """
-        cpu64 = self.weight.device.type == "cpu" and self.weight.dtype == torch.float64
-        if native is None:
-            native = cpu64 and native_initiation.AVAILABLE
-        if native and not (cpu64 and native_initiation.AVAILABLE):
-            raise ValueError(f"native=True needs the compiled classifier (built: "
-                             f"{native_initiation.AVAILABLE}) on the CPU in float64 (got "
-                             f"{self.weight.device}, {self.weight.dtype})")  # fmt: skip
-        self.native = bool(native)
+        w = self.weight
+        self.native = compiled(native, {
+            "the compiled classifier (built)": native_initiation.AVAILABLE,
+            f"the classifier on the CPU in float64 (it is on {w.device}, {w.dtype})":
+                w.device.type == "cpu" and w.dtype == torch.float64,
+        }, builtin_type_problems({"the initiation classifier": (self, InitiationClassifier)}))
         if self.native:
             dims = torch.zeros(OBS_DIM, dtype=torch.bool)
             dims[list(self.distance_dims)] = True
@@ -190,8 +201,9 @@ class InitiationClassifier(nn.Module):
 
     # ----------------------------------------------------------------------------- membership
     def _check_obs(self, obs: Tensor) -> Tensor:
-        if tuple(obs.shape) != (self.population, OBS_DIM):
-            raise ValueError(f"obs must be [P={self.population}, 4], got {tuple(obs.shape)}")
+        if obs.shape[0] != self.population or obs.shape[-1] != self.obs_dim:
+            raise ValueError(f"obs must be [P={self.population}, ..., {self.obs_dim}], got "
+                             f"{tuple(obs.shape)}")  # fmt: skip
         w = self.weight
         if obs.dtype == w.dtype and obs.device == w.device:  # every step: skip a no-op .to
             return obs
@@ -202,52 +214,24 @@ class InitiationClassifier(nn.Module):
         return self.features(2.0 * obs - 1.0 if self.centered else obs)
 
     def logit(self, obs: Tensor) -> Tensor:
-        """``weight . phi(s) + bias`` for every slot: ``obs [P, 4] -> [P, K]``."""
+        """``weight . phi(s) + bias`` for every slot: ``obs [P, *B, D] -> [P, *B, K]``
+        (agent p's states only meet agent p's weights). Override it to use your own model."""
         phi = self.phi(self._check_obs(obs))
-        return rowwise_dot(self.weight, phi[:, None, :]) + self.bias
+        between = (1,) * (phi.ndim - 2)  # the batch dims *B
+        weight = self.weight.view(self.population, *between, self.slots, -1)
+        bias = self.bias.view(self.population, *between, self.slots)
+        return rowwise_dot(weight, phi[..., None, :]) + bias
+
+    def builtin_model(self) -> bool:
+        """Whether the set is this class's logistic model (:meth:`logit` and :meth:`phi` not
+        overridden): it is fitted in closed form on ``weight``/``bias``; otherwise
+        :mod:`.initiation_fit` fits and compares the subclass's own model."""
+        cls = type(self)
+        return cls.logit is InitiationClassifier.logit and cls.phi is InitiationClassifier.phi
 
     def probability(self, obs: Tensor) -> Tensor:
         """``sigmoid(logit)`` written as ``1 / (1 + exp(-z))`` (layout-invariant)."""
         return 1.0 / (1.0 + torch.exp(-self.logit(obs)))
-
-    def _within(self, points: Tensor, examples: Tensor) -> Tensor:
-        """``|point - example| <= distance`` (in ``distance_dims``) for every pair:
-        ``points [..., N, 4]``, ``examples [..., M, 4]`` -> ``[..., N, M]``.
-
-        ``cdist`` without the matrix-product shortcut computes each pair on its own (one
-        kernel instead of a dozen elementwise operations, and the same bits whatever the batch
-        around it, which ``tests/options/test_initiation.py`` checks).
-        """
-        if len(self.distance_dims) < OBS_DIM:
-            dims = list(self.distance_dims)
-            points, examples = points[..., dims], examples[..., dims]
-        distance = torch.cdist(points, examples, compute_mode="donot_use_mm_for_euclid_dist")
-        return distance <= self.distance
-
-    def near_positive(self, obs: Tensor, mask: Tensor | None = None) -> Tensor:
-        """``[P, K]``: within ``distance`` of at least one stored positive example.
-
-        Only the slots in ``mask [P, K]`` (default all) are checked; others read False.
-        """
-        obs = self._check_obs(obs)
-        mask = torch.ones_like(self.trained) if mask is None else mask
-        mask = check_slot_mask(mask, self.population, self.slots)
-        if bool(mask.all()):  # every slot: work on the stores in place, no gather
-            examples, count, labels = self.examples, self.count, self.labels
-            point = obs[:, None, :].expand(-1, self.slots, -1)
-        else:
-            pi, ki = mask.nonzero().unbind(-1)
-            examples, count, labels = self.examples[pi, ki], self.count[pi, ki], self.labels[pi, ki]
-            point = obs[pi]
-        stored = torch.arange(self.capacity, device=obs.device) < count[..., None]
-        within = self._within(point.reshape(-1, 1, OBS_DIM), examples.reshape(-1, self.capacity,
-                                                                              OBS_DIM))
-        near = (within.reshape(stored.shape) & stored & labels).any(-1)
-        if bool(mask.all()):
-            return near
-        out = torch.zeros_like(self.trained)
-        out[pi, ki] = near
-        return out
 
     def contains(self, obs: Tensor) -> Tensor:
         """Initiation-set membership ``[P, K]``: true everywhere for an untrained slot, else
@@ -274,6 +258,8 @@ class InitiationClassifier(nn.Module):
         ``distance`` (in ``distance_dims``) of a stored positive example for constrained slots.
         """
         p, k = int(agent), int(slot)
+        if not self.builtin_model():  # the subclass's own model, through its logit
+            return initiation_fit.contains_points(self, p, k, obs, _POINTS_CHUNK)
         w, b = self.weight[p, k], self.bias[p, k]
         trained, constrained = bool(self.trained[p, k]), bool(self.constrained[p, k])
         count = int(self.count[p, k])
@@ -292,75 +278,6 @@ class InitiationClassifier(nn.Module):
                 member = member & near
             out.append(member)
         return torch.cat(out) if out else torch.zeros(0, dtype=torch.bool, device=w.device)
-
-    # ----------------------------------------------------------------------------- data
-    def add_examples(self, agents: int | Tensor, slots: int | Tensor, obs: Tensor,
-                     labels: Tensor) -> Tensor:  # fmt: skip
-        """Store labelled examples (in order) and mark their slots for refitting.
-
-        Args:
-            agents, slots: int (all examples) or ``LongTensor [N]`` (one per example).
-            obs: ``[N, 4]`` observations; labels: ``[N]`` bool or 0/1 (positive = in the set).
-
-        Returns:
-            ``BoolTensor [P, K]``: the slots that received data.
-        """
-        if obs.ndim != 2 or obs.shape[-1] != OBS_DIM:
-            raise ValueError(f"obs must be [N, 4], got {tuple(obs.shape)}")
-        n, device = obs.shape[0], self.weight.device
-        if labels.shape != (n,):
-            raise ValueError(f"labels must be [N={n}], got {tuple(labels.shape)}")
-        p = torch.as_tensor(agents, dtype=torch.int64, device=device).expand(n)
-        k = torch.as_tensor(slots, dtype=torch.int64, device=device).expand(n)
-        if self.native:  # one compiled pass, the same places and bits
-            touched = torch.zeros(self.population, self.slots, dtype=torch.bool)
-            if not native_initiation.store(self, p.contiguous(), k.contiguous(),
-                                           for_c(obs, torch.float64), for_c(labels, torch.bool),
-                                           touched):  # fmt: skip
-                raise ValueError(f"agent/slot indices out of range for P={self.population}, "
-                                 f"K={self.slots}")  # fmt: skip
-            self.dirty |= touched
-            return touched
-        if bool(((p < 0) | (p >= self.population) | (k < 0) | (k >= self.slots)).any()):
-            raise ValueError(f"agent/slot indices out of range for P={self.population}, "
-                             f"K={self.slots}")  # fmt: skip
-        touched = torch.zeros(self.population * self.slots, dtype=torch.bool, device=device)
-        if n == 0:
-            return touched.reshape(self.population, self.slots)
-        labels = labels.to(device).to(torch.bool)
-        if self.keep_negatives and n > 1 and not bool((labels == labels[0]).all()):
-            # Mixed labels: one at a time, so each positive sees the labels stored before it.
-            for i in range(n):
-                touched |= self.add_examples(p[i], k[i], obs[i:i + 1], labels[i:i + 1]).reshape(-1)
-            return touched.reshape(self.population, self.slots)
-        flat = p * self.slots + k
-        cell, keep = store_places(flat, self.seen.reshape(-1), self.seeds[p], k,
-                                  self.generation[p, k], self.capacity, self.replacement)
-        if self.keep_negatives and bool(labels[0]):
-            # All positive: drop those landing on a place that held a negative before this
-            # batch (a place filled earlier in the batch holds a positive).
-            store, place = cell // self.capacity, cell % self.capacity
-            held = place < self.count.view(-1)[store]
-            negative = held & ~self.labels.view(-1)[cell]
-            cell, keep = cell[~negative], keep[~negative]
-        self.examples.view(-1, OBS_DIM)[cell] = obs[keep].to(self.examples.dtype)
-        self.labels.view(-1)[cell] = labels[keep]
-        self.seen.view(-1).index_add_(0, flat, torch.ones_like(flat))
-        self.count.copy_(torch.clamp(self.seen, max=self.capacity))
-        touched[flat] = True
-        touched = touched.reshape(self.population, self.slots)
-        self.dirty |= touched
-        return touched
-
-    def stored_classes(self) -> tuple[Tensor, Tensor]:
-        """``(positive, negative)`` ``[P, K]``: the slot stores an example of that class."""
-        stored = torch.arange(self.capacity, device=self.labels.device) < self.count[..., None]
-        return (self.labels & stored).any(-1), (~self.labels & stored).any(-1)
-
-    def has_both_classes(self) -> Tensor:
-        """``[P, K]``: the slot stores at least one positive and one negative example."""
-        positive, negative = self.stored_classes()
-        return positive & negative
 
     # ----------------------------------------------------------------------------- fitting
     @torch.no_grad()
@@ -383,9 +300,13 @@ class InitiationClassifier(nn.Module):
         if where.shape[0] > 0:
             pi, ki = where[:, 0], where[:, 1]
             lengths = self.fit_length(self.count[pi, ki])
-            for length in torch.unique(lengths).tolist():
-                group = lengths == length
-                self._fit_slots(pi[group], ki[group], int(length))
+            if self.builtin_model():
+                for length in torch.unique(lengths).tolist():
+                    group = lengths == length
+                    self._fit_slots(pi[group], ki[group], int(length))
+            else:  # the subclass's own model, by its optimizer
+                with torch.enable_grad():
+                    initiation_fit.gradient_fit(self, mask, int(lengths.max()))
             self.sweeps_done[pi, ki] += self.sweeps
             self.trained[pi, ki] = True
         self.dirty &= ~mask
@@ -438,13 +359,22 @@ class InitiationClassifier(nn.Module):
 
     # ----------------------------------------------------------------------------- convergence
     def snapshot(self) -> Tensor:
-        """A copy of every slot's weights and bias, ``[P, K, F + 1]``."""
+        """A copy of every slot's weights and bias, ``[P, K, F + 1]``; for a model of a
+        subclass's own, its logits at fixed probe points (:func:`.initiation_fit.snapshot`)."""
+        if not self.builtin_model():
+            return initiation_fit.snapshot(self)
         return torch.cat([self.weight, self.bias[..., None]], dim=-1).detach().clone()
+
+    def make_optimizer(self, params: list[nn.Parameter]) -> torch.optim.Optimizer:
+        """The optimizer that fits a subclass's own model (each fit makes a new one): plain
+        SGD at ``lr``, the built-in fit's step. Override it for Adam and the like."""
+        return torch.optim.SGD(params, lr=self.lr)
 
     def weight_change(self, before: Tensor, after: Tensor | None = None) -> Tensor:
         """Mean absolute change per weight (bias included) between snapshots: ``[P, K]``.
 
-        The paper's convergence test compares it with 0.15 per episode.
+        The paper's convergence test compares it with 0.15 per episode. For a subclass's own
+        model the snapshots are logits at probe points, so it is the mean change of the logit.
         """
         after = self.snapshot() if after is None else after
         if before.shape != after.shape:

@@ -53,8 +53,10 @@ class OptionQHead(nn.Module, ABC):
         config: the constructor's keyword arguments (plain Python values), used to rebuild the
             head when an :class:`~skillchain_torch.options.OptionBank` is loaded.
 
-    Subclasses implement :meth:`forward`, :meth:`td_update`, :meth:`reset_slots` and
-    :meth:`select_agents`.
+    Subclasses implement :meth:`forward`, :meth:`td_update`, :meth:`reset_slots`,
+    :meth:`select_agents` and :meth:`slot_tensors` (abstract: instantiating a head without one
+    is a ``TypeError`` naming it); the encoded paths have defaults. Register the class
+    (:func:`~skillchain_torch.options.register_q_head`) to load saved banks holding it.
     """
 
     population: int
@@ -135,13 +137,14 @@ class OptionQHead(nn.Module, ABC):
         """:meth:`td_update` from a code of :meth:`encode`."""
         return self.td_update(code, action, target, mask)
 
+    @abstractmethod
     def slot_tensors(self) -> dict[str, Tensor]:
         """The learnable state as tensors with leading dims ``[P, K]`` (views, by name).
 
         :meth:`read_slots` / :meth:`write_slots` use it to save and restore one slot per agent
-        (skill chaining drops the updates of an unsuccessful execution, paper 5.1).
+        (skill chaining drops the updates of an unsuccessful execution, paper 5.1), and the
+        divergence check reads it.
         """
-        raise NotImplementedError(f"{type(self).__name__} does not expose its slot tensors")
 
     def read_slots(self, slot: Tensor) -> dict[str, Tensor]:
         """A copy of slot ``slot[p]`` of every agent p: ``{name: [P, ...]}``

@@ -196,7 +196,7 @@ def test_state_from_the_other_kernel_is_refused():
 def test_native_true_names_what_is_missing():
     bank = OptionBank(1, 1, MLPOptionQHead(1, 1, hidden=4, layers=1),
                       OptionBank.build(1, 1).classifier)
-    with pytest.raises(ValueError, match="Fourier option heads"):
+    with pytest.raises(ValueError, match="the option head is MLPOptionQHead, not the built-in"):
         HierarchicalAgent(bank, order=1, native=True)
     agent = HierarchicalAgent(bank, order=1)  # the default falls back to torch
     assert agent.native is False and agent.bank.classifier.native is False

@@ -1,0 +1,52 @@
+"""The one switch between the torch path and a compiled kernel.
+
+Example:
+    >>> from skillchain_torch.options import InitiationClassifier
+    >>> class Mine(InitiationClassifier):
+    ...     pass
+    >>> clf = Mine(population=1, slots=1, capacity=4)
+    >>> builtin_type_problems({"the initiation classifier": (clf, InitiationClassifier)})
+    ['the initiation classifier is Mine, not the built-in InitiationClassifier']
+    >>> compiled(None, {"built": True}, [])
+    True
+    >>> compiled(True, {"built": False}, ["the option head is Mine, not ..."])
+    ... # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: the compiled path cannot run: it needs built; the option head is Mine, ...
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+__all__ = ["builtin_type_problems", "compiled"]
+
+
+def builtin_type_problems(pieces: Mapping[str, tuple[object, type]]) -> list[str]:
+    """One sentence per piece that is not exactly its built-in class (``{name: (piece,
+    builtin)}``): a subclass may override any method, which a kernel would not run."""
+    return [f"{name} is {type(piece).__name__}, not the built-in {builtin.__name__}"
+            for name, (piece, builtin) in pieces.items() if type(piece) is not builtin]
+
+
+def compiled(native: bool | None, needs: Mapping[str, bool],
+             problems: Sequence[str] = ()) -> bool:  # fmt: skip
+    """Whether to run a compiled kernel.
+
+    Args:
+        native: the user's choice: ``None`` (the kernel where it applies), ``True`` (the
+            kernel, or an error), ``False`` (the torch path).
+        needs: ``{what the kernel needs: whether it holds}`` (built, the CPU, float64, ...).
+        problems: pieces that are not the built-ins the kernel replaces
+            (:func:`builtin_type_problems`).
+
+    Returns:
+        ``True`` for the kernel. Raises ``ValueError`` (one line, naming every missing need and
+        every piece) when ``native`` is ``True`` and the kernel cannot run.
+    """
+    missing = [f"it needs {name}" for name, ok in needs.items() if not ok] + list(problems)
+    if native and missing:
+        raise ValueError(f"the compiled path cannot run: {'; '.join(missing)}; use "
+                         "native=False (or leave it None) to take the torch path")
+    return not missing if native is None else bool(native)

@@ -1,0 +1,166 @@
+"""The pieces a researcher replaces, each declared once with every method it must provide.
+
+Skill chaining (paper sections 2, 4, 5.1) is assembled from five pieces. The agent, the
+discovery rules, the convergence test, the monitoring and the checkpoints reach them only
+through the methods below; the paper's Fourier/logistic pieces are one implementation of each,
+and a compiled backend (:mod:`skillchain_torch.backends`) runs only where a piece is *exactly*
+the built-in class it replaces (a subclass, or any other class, takes the torch path, so an
+override is never bypassed).
+
+====================  ==========================================  ===========================
+interface             the paper's implementation                  shapes
+====================  ==========================================  ===========================
+:class:`InitiationSet`  :class:`~skillchain_torch.options.          ``obs [P, D] -> [P, K]``
+                      InitiationClassifier` (logistic, 5.1)
+:class:`OptionHead`   :class:`~skillchain_torch.options.           ``obs [P, D] -> [P, K, A]``
+                      FourierOptionQHead` (Fourier, Q-learning)
+:class:`ValueHead`    :class:`~skillchain_torch.modules.           ``phi [P, F] -> [P, 5 + K]``
+                      LinearQHead` (the top level, SMDP Sarsa)
+:class:`TerminationPredicate`  :class:`~skillchain_torch.options.  ``obs [P, D] -> [P]``
+                      GoalEvent`, ``InitiationSetEvent``
+:class:`Learner`      :class:`~skillchain_torch.objectives.        a TD step on a head
+                      SarsaUpdate`, ``IntraOptionQLearning``
+====================  ==========================================  ===========================
+
+``P`` agents of a population, ``K`` option slots per agent, ``D`` observation dims, ``A``
+primitive actions, ``F`` features.
+
+The protocols are ``runtime_checkable`` (``isinstance`` tests that the methods exist, not their
+shapes); :func:`missing_methods` names what a candidate lacks.
+
+Example:
+    >>> from skillchain_torch.options import InitiationClassifier
+    >>> clf = InitiationClassifier(population=1, slots=2, capacity=8)
+    >>> isinstance(clf, InitiationSet), missing_methods(clf, InitiationSet)
+    (True, [])
+    >>> missing_methods(object(), InitiationSet)[:3]
+    ['add_examples', 'config', 'constrain']
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+from torch import Tensor
+
+from skillchain_torch.options.q_head import OptionQHead as OptionHead
+from skillchain_torch.options.termination import TerminationPredicate
+
+__all__ = ["InitiationSet", "Learner", "OptionHead", "TerminationPredicate", "ValueHead",
+           "missing_methods"]
+
+
+@runtime_checkable
+class InitiationSet(Protocol):
+    """Per-slot initiation sets ``I_k`` of P agents, learned from labelled example stores.
+
+    A subclass of :class:`~skillchain_torch.options.InitiationClassifier` that overrides
+    :meth:`logit` (for instance with an ``nn.Module`` of its own) gets everything else from the
+    base class: the stores, the distance constraint, a gradient fit of its own parameters, a
+    convergence measure from its outputs, images, and save/load through the registry
+    (:func:`~skillchain_torch.options.register_classifier`).
+
+    Attributes:
+        population, slots: P and K.
+        trained: ``BoolTensor [P, K]``, fitted at least once (an untrained set holds everything).
+        config: the constructor's keyword arguments (rebuilds it on load).
+    """
+
+    population: int
+    slots: int
+    trained: Tensor
+    config: dict[str, Any]
+
+    def logit(self, obs: Tensor) -> Tensor:
+        """``obs [P, *B, D] -> [P, *B, K]``: every slot's log-odds that ``obs`` is in its set."""
+
+    def contains(self, obs: Tensor) -> Tensor:
+        """``obs [P, D] -> BoolTensor [P, K]``: membership, one state per agent (every step)."""
+
+    def contains_points(self, agent: int, slot: int, obs: Tensor) -> Tensor:
+        """``obs [N, D] -> BoolTensor [N]``: one slot's membership of many states (images)."""
+
+    def add_examples(self, agents: int | Tensor, slots: int | Tensor, obs: Tensor,
+                     labels: Tensor) -> Tensor:  # fmt: skip
+        """Store ``obs [N, D]`` with ``labels [N]``; ``[P, K]`` mask of the slots given data."""
+
+    def stored_classes(self) -> tuple[Tensor, Tensor]:
+        """``(positive, negative)`` ``[P, K]``: the slot stores an example of that class."""
+
+    def has_both_classes(self) -> Tensor:
+        """``[P, K]``: the slot stores both classes."""
+
+    def fit(self, mask: Tensor | None = None) -> Tensor:
+        """Fit the slots in ``mask [P, K]`` (default: those with new data); the mask fitted."""
+
+    def constrain(self, mask: Tensor) -> None:
+        """Turn on the distance constraint for the slots in ``mask [P, K]`` (learned sets)."""
+
+    def reset_slots(self, mask: Tensor) -> None:
+        """Forget the slots in ``mask [P, K]`` (a new option takes the slot)."""
+
+    def snapshot(self) -> Tensor:
+        """``[P, K, M]``: what the convergence test compares between episodes."""
+
+    def weight_change(self, before: Tensor, after: Tensor | None = None) -> Tensor:
+        """``[P, K]``: mean absolute change between two :meth:`snapshot` s (paper: < 0.15)."""
+
+    def select_agents(self, index, seeds: Tensor | None = None) -> InitiationSet:
+        """A new set holding agents ``index`` (repeats allowed)."""
+
+    def state_dict(self, *args, **kwargs) -> dict[str, Any]: ...
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False): ...
+
+
+@runtime_checkable
+class ValueHead(Protocol):
+    """The top level's action values over ``5 + K`` decisions (primitives, then option slots).
+
+    Attributes:
+        population (P), num_decisions (D), num_features (F).
+    """
+
+    population: int
+    num_decisions: int
+    num_features: int
+
+    def forward(self, phi: Tensor) -> Tensor:
+        """``phi [P, F] -> Q [P, D]``."""
+
+    def forward_mask(self, phi: Tensor, mask: Tensor, dense: int = 0) -> Tensor:
+        """``Q [P, D]`` on ``mask [P, D]`` only (0 elsewhere); the first ``dense`` columns
+        of every row always."""
+
+    def q_value(self, phi: Tensor, decision: Tensor, index: Tensor | None = None) -> Tensor:
+        """``Q(s_p, decision_p)``: ``[P]`` (or the rows ``index``)."""
+
+    def add_to_decision(self, decision: Tensor, step: Tensor, rows: Tensor | None = None
+                        ) -> None:  # fmt: skip
+        """The learner's step: ``w[p, decision_p] += step[p]`` (a semi-gradient TD step)."""
+
+
+@runtime_checkable
+class Learner(Protocol):
+    """A TD learning rule applied to a head: ``learner(head, ...) -> TD errors``.
+
+    :class:`~skillchain_torch.objectives.SarsaUpdate` (SMDP Sarsa, the top level) and
+    :class:`~skillchain_torch.objectives.IntraOptionQLearning` (each option) are the paper's.
+    """
+
+    def __call__(self, head: Any, *args: Tensor, **kwargs: Any) -> Tensor: ...
+
+
+def missing_methods(piece: object, interface: type) -> list[str]:
+    """The methods and attributes of ``interface`` that ``piece`` lacks, sorted.
+
+    Example:
+        >>> missing_methods(object(), ValueHead)
+        ['add_to_decision', 'forward', 'forward_mask', 'num_decisions', 'num_features', \
+'population', 'q_value']
+    """
+    names = set(getattr(interface, "__protocol_attrs__", ()))
+    if not names:  # Python < 3.12 keeps them elsewhere
+        names = {n for n in vars(interface) if not n.startswith("_")}
+        names |= set(getattr(interface, "__annotations__", {}))
+    return sorted(n for n in names if not hasattr(piece, n))

@@ -1,0 +1,116 @@
+"""Fitting, comparing and drawing an initiation set whose model is the user's own.
+
+:class:`~skillchain_torch.options.InitiationClassifier` fits its logistic model in closed form
+on ``weight``/``bias``. A subclass that overrides ``logit`` (``obs [P, *B, D] -> [P, *B, K]``)
+has a model the closed form knows nothing of, so the classifier hands it here:
+
+* :func:`gradient_fit`: the same fit (``sweeps`` full-batch steps of the mean log-loss over
+  each slot's stored examples, classes weighted equally when ``balanced``) by autograd, on the
+  model's ``requires_grad`` parameters, with the classifier's ``make_optimizer`` (SGD at
+  ``lr`` unless overridden). With SGD on the logistic model this is the closed-form step.
+* :func:`snapshot`: the model's logits at fixed probe points, ``[P, K, M]``: what the
+  convergence test compares between episodes, since a general model has no per-slot weights.
+* :func:`contains_points`: one slot's membership of many states through the model's logit.
+
+Example:
+    >>> import torch
+    >>> from torch import nn
+    >>> from skillchain_torch.options import InitiationClassifier
+    >>> class LinearOnObs(InitiationClassifier):      # logit = a . s + b, its own parameters
+    ...     def __init__(self, **kw):
+    ...         super().__init__(**kw)
+    ...         self.a = nn.Parameter(torch.zeros(self.population, self.slots, 4,
+    ...                                           dtype=torch.float64))
+    ...     def logit(self, obs):
+    ...         return torch.einsum("p...d,pkd->p...k", obs, self.a)
+    >>> clf = LinearOnObs(population=1, slots=1, capacity=64, lr=1.0)
+    >>> x = torch.rand(64, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    >>> _ = clf.add_examples(0, 0, x, x[:, 0] < 0.5)
+    >>> _ = clf.fit()
+    >>> bool(clf.a[0, 0, 0] < 0), clf.builtin_model()   # learned "left of x = 0.5"
+    (True, False)
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+from torch.nn import functional
+
+__all__ = ["PROBE_POINTS", "contains_points", "gradient_fit", "probe", "snapshot"]
+
+PROBE_POINTS = 64  # states where a model's logits are compared between episodes
+
+
+def probe(clf, dim: int) -> Tensor:
+    """``[M, dim]`` fixed points of the unit box (the observation's range), the same for every
+    agent and episode: a generator of its own, seeded once, so no agent's stream is touched."""
+    g = torch.Generator().manual_seed(0x5EED)
+    return torch.rand(PROBE_POINTS, dim, generator=g, dtype=torch.float64).to(
+        device=clf.examples.device, dtype=clf.examples.dtype)
+
+
+@torch.no_grad()
+def snapshot(clf) -> Tensor:
+    """``[P, K, M]``: every slot's logit at the :func:`probe` points."""
+    points = probe(clf, clf.examples.shape[-1])
+    logits = clf.logit(points.expand(clf.population, -1, -1))  # [P, M, K]
+    return logits.transpose(1, 2).detach().clone()
+
+
+def _own_slot_logits(clf, examples: Tensor) -> Tensor:
+    """Slot k's logit at slot k's examples: ``examples [P, K, L, D] -> [P, K, L]``."""
+    P, K, L, D = examples.shape
+    z = clf.logit(examples.reshape(P, K * L, D)).reshape(P, K, L, K)
+    return z.diagonal(dim1=1, dim2=3).permute(0, 2, 1)  # [P, L, K] -> [P, K, L]
+
+
+def gradient_fit(clf, mask: Tensor, length: int) -> None:
+    """``clf.sweeps`` optimizer steps on the summed per-slot mean log-loss of the slots in
+    ``mask [P, K]`` over their first ``length`` stored places. Raises ``ValueError`` if the
+    model has nothing to train."""
+    params = [p for p in clf.parameters() if p.requires_grad]
+    if not params:
+        raise ValueError(f"{type(clf).__name__} overrides logit but has no parameter with "
+                         "requires_grad=True: nothing to fit")  # fmt: skip
+    examples = clf.examples[:, :, :length]
+    y = clf.labels[:, :, :length].to(examples.dtype)
+    stored = (torch.arange(length, device=y.device) < clf.count[..., None]) & mask[..., None]
+    s = stored.to(y.dtype)
+    if clf.balanced:  # each class's examples share half of a slot's loss
+        positives = (s * y).sum(-1, keepdim=True)
+        negatives = s.sum(-1, keepdim=True) - positives
+        weight = torch.where(y > 0, 0.5 / positives.clamp(min=1.0), 0.5 / negatives.clamp(min=1.0))
+    else:
+        weight = 1.0 / s.sum(-1, keepdim=True).clamp(min=1.0)
+    weight = weight * s
+    optimizer = clf.make_optimizer(params)
+    for _ in range(clf.sweeps):
+        optimizer.zero_grad()
+        z = _own_slot_logits(clf, examples)
+        loss = functional.binary_cross_entropy_with_logits(z, y, weight=weight, reduction="sum")
+        loss.backward()
+        optimizer.step()
+
+
+@torch.no_grad()
+def contains_points(clf, agent: int, slot: int, obs: Tensor, chunk: int) -> Tensor:
+    """``BoolTensor [N]``: slot ``slot`` of agent ``agent`` at ``obs [N, D]`` by the model's
+    logit, with the classifier's rule (true everywhere untrained; near a positive when
+    constrained). The logit takes every agent's row, so the points go to all P (rows other
+    than ``agent`` are discarded): P times the work, fine for images."""
+    p, k = int(agent), int(slot)
+    count = int(clf.count[p, k])
+    positives = clf.examples[p, k, :count][clf.labels[p, k, :count]]
+    out = []
+    for part in obs.to(device=clf.examples.device, dtype=clf.examples.dtype).split(chunk):
+        if bool(clf.trained[p, k]):
+            member = clf.logit(part.expand(clf.population, -1, -1))[p, :, k] > 0
+        else:
+            member = torch.ones(part.shape[0], dtype=torch.bool, device=part.device)
+        if bool(clf.constrained[p, k]):
+            near = (clf._within(part, positives).any(-1) if positives.shape[0]
+                    else torch.zeros_like(member))  # fmt: skip
+            member = member & near
+        out.append(member)
+    return torch.cat(out) if out else torch.zeros(0, dtype=torch.bool, device=obs.device)
