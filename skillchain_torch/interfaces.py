@@ -135,9 +135,13 @@ class ValueHead(Protocol):
     def q_value(self, phi: Tensor, decision: Tensor, index: Tensor | None = None) -> Tensor:
         """``Q(s_p, decision_p)``: ``[P]`` (or the rows ``index``)."""
 
-    def add_to_decision(self, decision: Tensor, step: Tensor, rows: Tensor | None = None
-                        ) -> None:  # fmt: skip
-        """The learner's step: ``w[p, decision_p] += step[p]`` (a semi-gradient TD step)."""
+    def set_values(self, mask: Tensor, value: Tensor) -> None:
+        """``Q(s, d) = value[p, d]`` everywhere for the ``(p, d)`` in ``mask [P, D]`` (how
+        discovery starts a joining option's value; the only write discovery makes)."""
+
+    def parameters(self, recurse: bool = True):
+        """What an optimizer trains (``nn.Module``'s); the built-in linear head has none and
+        is stepped in closed form by :class:`~skillchain_torch.objectives.SarsaUpdate`."""
 
 
 @runtime_checkable
@@ -156,8 +160,8 @@ def missing_methods(piece: object, interface: type) -> list[str]:
 
     Example:
         >>> missing_methods(object(), ValueHead)
-        ['add_to_decision', 'forward', 'forward_mask', 'num_decisions', 'num_features', \
-'population', 'q_value']
+        ['forward', 'forward_mask', 'num_decisions', 'num_features', 'parameters', \
+'population', 'q_value', 'set_values']
     """
     names = set(getattr(interface, "__protocol_attrs__", ()))
     if not names:  # Python < 3.12 keeps them elsewhere

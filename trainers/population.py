@@ -84,6 +84,19 @@ class EpisodeBatch:
     population_episode: int | None
 
 
+def _per_agent(module, population: int, names: tuple[str, ...] = ("weight",)) -> list:
+    """A learner's tensors to check for divergence, each ``[P, ...]``: the built-in
+    ``names`` where the module has them, and the trainable parameters of a user's model that
+    hold one slice per agent (a parameter shared by all agents cannot be told apart by agent
+    and is not checked)."""
+    tensors = [getattr(module, n) for n in names if isinstance(getattr(module, n, None),
+                                                               torch.Tensor)]  # fmt: skip
+    seen = {id(t) for t in tensors}
+    tensors += [p for p in module.parameters() if p.requires_grad and id(p) not in seen
+                and p.dim() >= 1 and p.shape[0] == population]  # fmt: skip
+    return [t.detach() for t in tensors]
+
+
 class PopulationTrainer:
     """Train a population of agents on Pinball.
 
@@ -99,6 +112,10 @@ class PopulationTrainer:
         num_threads: torch intra-op threads while :meth:`train` runs (restored afterwards);
             ``None`` keeps torch's setting. Default 1: the per-step tensors are small, and a
             parallel region waits for a busy core (10x slowdowns on a shared machine).
+        agent: an agent object of your own composition (``config.runs`` agents, the episode
+            protocol of :class:`~.flat.FlatSarsaAgent`, e.g. a
+            :class:`~skillchain_torch.agents.SkillChainingAgent` with your own pieces);
+            ``None`` builds ``config.agent`` by name.
 
     Example:
         >>> trainer = PopulationTrainer(TrainConfig(runs=2, episodes=1, max_episode_steps=5))
@@ -110,7 +127,7 @@ class PopulationTrainer:
 
     def __init__(self, config: TrainConfig, out_dir: str | Path | None = None,
                  scalar_max: int = SCALAR_MAX, num_threads: int | None = 1,
-                 native: bool | None = None):
+                 native: bool | None = None, agent=None):
         config = config.resolved().validate()
         self.config = config
         self.out_dir = None if out_dir is None else Path(out_dir)
@@ -120,7 +137,12 @@ class PopulationTrainer:
                               dtype=torch.float64, max_episode_steps=config.max_episode_steps,
                               seed=config.seed)
         self.stepper = ActiveEnvStepper(self.env, scalar_max=scalar_max, native=native)
-        self.agent = make_agent(config, device=self.device, native=native)
+        if agent is None:
+            agent = make_agent(config, device=self.device, native=native)
+        elif int(agent.population) != config.runs:
+            raise ValueError(f"the agent holds {agent.population} agents but the config asks "
+                             f"for runs={config.runs}")  # fmt: skip
+        self.agent = agent
         bank = getattr(self.agent, "bank", None)
         if bank is not None and bank.map is None and not bank.legacy:
             bank.map = config.map  # saved with the options (a run on another map refuses them)
@@ -292,8 +314,9 @@ class PopulationTrainer:
         if rows is not None and work is not None:
             top = work.w.index_select(1, rows).transpose(0, 1)
         else:
-            top = pick(agent.q_head.weight)
-        learners = [("the top-level Q-head", f"lower --alpha (now {cfg.alpha:g})", [top])]
+            top = [pick(t) for t in _per_agent(agent.q_head, agent.population)]
+        learners = [("the top-level Q-head", f"lower --alpha (now {cfg.alpha:g})",
+                     top if isinstance(top, list) else [top])]
         bank = getattr(agent, "bank", None)
         if bank is None:
             return learners
@@ -311,7 +334,7 @@ class PopulationTrainer:
             ("the option Q-heads", advice, heads),
             ("the initiation classifiers",
              f"their step size (lr {classifier.lr:g}) is not a run parameter",
-             [pick(classifier.weight), pick(classifier.bias)]),
+             [pick(t) for t in _per_agent(classifier, agent.population, ("weight", "bias"))]),
         ]
         return learners
 

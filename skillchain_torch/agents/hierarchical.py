@@ -56,6 +56,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch
+from tensordict import TensorDict
 from torch import Tensor, nn
 
 from skillchain_torch.agents import native_hierarchical as _native
@@ -64,7 +65,7 @@ from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusio
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.native import check_same_kernels
-from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate, discount
+from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate, SMDPSarsaLoss, discount
 from skillchain_torch.options import (
     FourierOptionQHead,
     GoalEvent,
@@ -160,6 +161,16 @@ class HierarchicalAgent(nn.Module):
             never does worse than running the option to its end, under the values). The
             interrupted execution is neither a success nor a failure of the option. Off (the
             paper: options run until their termination predicate fires or they time out).
+        q_head: the top-level value head (a :class:`~skillchain_torch.interfaces.ValueHead`
+            over ``5 + K`` decisions, on ``features``); default the paper's
+            :class:`~skillchain_torch.modules.LinearQHead`, stepped in closed form by
+            :class:`~skillchain_torch.objectives.SarsaUpdate`. Any other head learns by
+            :class:`~skillchain_torch.objectives.SMDPSarsaLoss` and ``optimizer``.
+        features: the top level's features of the observation (default the paper's
+            :class:`~skillchain_torch.features.FourierBasis` of ``order``); any module
+            ``obs [P, 4] -> [P, F]``, e.g. ``nn.Identity()`` for a head on the raw observation.
+        optimizer: for a head of the user's own: a ``torch.optim.Optimizer`` over its
+            parameters (default SGD at ``alpha``).
         device: torch device (default: the bank's).
         native: run the per-step arithmetic in C (:mod:`.native_hierarchical`, and the
             classifier's memberships and fits, :mod:`~skillchain_torch.options.
@@ -186,6 +197,9 @@ class HierarchicalAgent(nn.Module):
         failure_bootstrap: str = "decision",
         intra_option_primitives: bool = False,
         interruption: bool = False,
+        q_head: nn.Module | None = None,
+        features: nn.Module | None = None,
+        optimizer: torch.optim.Optimizer | None = None,
         device: torch.device | str | None = None,
         native: bool | None = None,
     ):
@@ -198,7 +212,17 @@ class HierarchicalAgent(nn.Module):
         self.interruption = bool(interruption)
         device = torch.device(bank.status.device if device is None else device)
         self.bank = bank.to(device)
-        self.native = _native.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES)
+        self.population, self.slots = bank.population, bank.slots
+        self.num_decisions = NUM_PRIMITIVES + self.slots
+        self.order = int(order)
+        self.features = (FourierBasis(OBS_DIM, order) if features is None else features).to(device)
+        num_features = self.features(torch.zeros(self.population, OBS_DIM, dtype=torch.float64,
+                                                 device=device)).shape[-1]  # fmt: skip
+        self.q_head = (LinearQHead(num_features, self.num_decisions, self.population,
+                                   device=device) if q_head is None else q_head.to(device))
+        self.native = _native.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES, {
+            "the top-level head": (self.q_head, LinearQHead),
+            "the top-level features": (self.features, FourierBasis)})
         # Memberships and refits go with the step where the classifier is the built-in one;
         # a classifier of the user's own keeps its torch path under a compiled step (and
         # native=True asks it for C, which it refuses, naming itself).
@@ -207,22 +231,22 @@ class HierarchicalAgent(nn.Module):
             classifier.set_native(self.native)
         elif hasattr(classifier, "set_native"):
             classifier.set_native(bool(native) and self.native)
-        self.population, self.slots = bank.population, bank.slots
-        self.num_decisions = NUM_PRIMITIVES + self.slots
-        self.order = int(order)
         self._exclusion = overlap_exclusion(self.bank) if overlap else None
         self.epsilon, self.option_epsilon = float(epsilon), float(option_epsilon)
         self.gamma = float(gamma)
         self.max_option_steps = int(max_option_steps)
         self.events = tuple(events)
-        self.features = FourierBasis(OBS_DIM, order).to(device)
-        self.register_buffer("_code_columns",
-                             shared_fourier_columns(self.features, self.bank.q_head),
-                             persistent=False)  # fmt: skip
-        self.q_head = LinearQHead(self.features.num_features, self.num_decisions,
-                                  self.population, device=device)
+        columns = (shared_fourier_columns(self.features, self.bank.q_head)
+                   if type(self.features) is FourierBasis else None)  # fmt: skip
+        self.register_buffer("_code_columns", columns, persistent=False)
         scale = self.features.step_size_scale() if scale_step_size else None
+        # The built-in linear head steps in closed form; any other head by its loss.
         self.update = SarsaUpdate(alpha, gamma, step_size_scale=scale).to(device)
+        self.closed_form = type(self.q_head) is LinearQHead
+        self.loss = None if self.closed_form else SMDPSarsaLoss(self.q_head, gamma)
+        if not self.closed_form and optimizer is None:
+            optimizer = torch.optim.SGD(self.q_head.parameters(), lr=alpha)
+        self.optimizer = optimizer
         self.option_update = IntraOptionQLearning(gamma, completion_reward)
         if isinstance(seed, Tensor):
             self.rng = CounterRNG(seed.to(device), stream=AGENT_STREAM)
@@ -237,10 +261,10 @@ class HierarchicalAgent(nn.Module):
         self.obs = torch.zeros(P, OBS_DIM, **f64)  # current s
         self.option_code = bank.q_head.encode(self.obs)  # the option heads' code of s
         self.contains = torch.zeros(P, self.slots, dtype=torch.bool, device=device)  # s in I_k
-        self.decision_phi = torch.zeros(P, self.features.num_features, **f64)  # phi(s_decision)
+        self.decision_phi = torch.zeros(P, num_features, **f64)  # phi(s_decision)
         # phi(s) of the current state, kept only for intra_option_primitives (its updates
         # are at s, which need not be where the decision in force was taken).
-        self.state_phi = torch.zeros(P, self.features.num_features if intra_option_primitives
+        self.state_phi = torch.zeros(P, num_features if intra_option_primitives
                                      else 0, **f64)  # fmt: skip
         self.decision = torch.zeros(P, **i64)  # in force (< 5 or 5 + k)
         self.option = torch.full((P,), -1, **i64)  # executing slot or -1
@@ -477,13 +501,11 @@ class HierarchicalAgent(nn.Module):
             best_primitive = self.last_q[:, :NUM_PRIMITIVES].max(1).values
             q_next = torch.where(timed_out, best_primitive, q_next)
         if self.intra_option_primitives:  # the option's primitive, one Q-learning step at s
-            self.update(self.q_head, self.state_phi, self.action, reward,
-                        torch.ones_like(self.duration), phi_next, self.action, terminated,
-                        active=inside, next_value=best)
+            self.learn(self.state_phi, self.action, reward, torch.ones_like(self.duration),
+                       best, terminated, inside)
             self.state_phi = torch.where(stepped[:, None], phi_next, self.state_phi)
-        smdp_delta = self.update(self.q_head, self.decision_phi, self.decision,
-                                 self.decision_return, self.duration.clamp(min=1), phi_next,
-                                 d_next, terminated, active=decision_ended, next_value=q_next)
+        smdp_delta = self.learn(self.decision_phi, self.decision, self.decision_return,
+                                self.duration.clamp(min=1), q_next, terminated, decision_ended)
         # The state tensors are replaced, never written in place, so no copies are needed.
         info = {"decision_ended": decision_ended, "duration": self.duration,
                 "decision_return": self.decision_return, "option_delta": option_delta,
@@ -497,6 +519,27 @@ class HierarchicalAgent(nn.Module):
         self.option = torch.where(ended, torch.full_like(self.option, -1), self.option)
         self._act(continuing, u[:, 2:])
         return info
+
+    def learn(self, phi: Tensor, decision: Tensor, ret: Tensor, duration: Tensor,
+              next_value: Tensor, terminated: Tensor, active: Tensor) -> Tensor:  # fmt: skip
+        """One SMDP Sarsa step of the top-level head toward ``ret + gamma^k next_value``
+        for the ``active`` agents; their TD errors ``[P]``. The built-in linear head steps in
+        closed form (:class:`SarsaUpdate`); any other by its loss and optimizer."""
+        if self.closed_form:
+            return self.update(self.q_head, phi, decision, ret, duration, phi, decision,
+                               terminated, active=active, next_value=next_value)
+        with torch.enable_grad():
+            return self._loss_step(phi, decision, ret, duration, next_value, terminated, active)
+
+    def _loss_step(self, phi, decision, ret, duration, next_value, terminated, active) -> Tensor:
+        td = TensorDict(phi=phi, decision=decision, decision_return=ret, duration=duration,
+                        next_value=next_value, terminated=terminated, active=active,
+                        batch_size=[self.population])  # fmt: skip
+        self.optimizer.zero_grad()
+        out = self.loss(td)
+        out["loss"].backward()
+        self.optimizer.step()
+        return out["td_error"]
 
     def all_active(self) -> bool:
         """Every agent is active: rows are agents (a check without a call into torch)."""
@@ -515,11 +558,13 @@ class HierarchicalAgent(nn.Module):
         out[self._index] = rows_value if rows_value.dtype == out.dtype else rows_value.to(out.dtype)
         return out
 
+    @torch.no_grad()
     def begin(self, obs: Tensor) -> Tensor:
         """First decisions of every active agent at its start observation ``[n, 4]``."""
         self._start_decisions(self._full(obs, self.obs), self.active.clone())
         return self.actions
 
+    @torch.no_grad()
     def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
         """Learn from a step in which no episode ended; the next actions ``[n]``."""
         none = torch.zeros_like(self.active)
@@ -527,6 +572,7 @@ class HierarchicalAgent(nn.Module):
                         none, none, self.active)
         return self.actions
 
+    @torch.no_grad()
     def observe_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
                      restart_rows: Tensor, start_obs: Tensor | None) -> Tensor:
         """Like :meth:`observe` when some episodes ended (see ``FlatSarsaAgent``): terminal
@@ -601,12 +647,15 @@ class HierarchicalAgent(nn.Module):
             "bank": self.bank.state_dict(),
             "episode": {name: getattr(self, name).clone() for name in self._EPISODE},
             "native": self.native,
+            **({} if self.optimizer is None else {"optimizer": self.optimizer.state_dict()}),
         }
 
     def load_state_dict(self, state, strict: bool = True, assign: bool = False):
         device = self.obs.device
         check_same_kernels(state, self.native)
         self.q_head.load_state_dict(state["q_head"])
+        if self.optimizer is not None and "optimizer" in state:
+            self.optimizer.load_state_dict(state["optimizer"])
         self.bank.load_state_dict(state["bank"])
         self.rng.load_state_dict(state["rng"])
         self.rng.to(device)

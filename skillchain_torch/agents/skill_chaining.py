@@ -43,6 +43,7 @@ from skillchain_torch.discovery import (
     SkillChaining,
 )
 from skillchain_torch.discovery.readings import FIRST_READING
+from skillchain_torch.features import FourierBasis
 from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 
 from .hierarchical import MAX_OPTION_STEPS, HierarchicalAgent, as_bool
@@ -82,6 +83,14 @@ class SkillChainingAgent(HierarchicalAgent):
                  value_start: str = "max-sample", value_bonus: float = 0.0,
                  **kwargs):  # fmt: skip
         super().__init__(bank, events=events, **kwargs)
+        # Two starts read the linear head's weights and the Fourier basis directly.
+        uses = [f"value_start={value_start!r}"] * (value_start == "agent") + \
+            [f"policy_start={policy_start!r}"] * (policy_start == "top-level")
+        if uses and not (self.closed_form and type(self.features) is FourierBasis):
+            raise ValueError(f"{' and '.join(uses)} fit the built-in LinearQHead over a "
+                             f"FourierBasis, not {type(self.q_head).__name__} over "
+                             f"{type(self.features).__name__}: use value_start='max-sample' "
+                             "and policy_start='zero' (the paper's) with your own head")
         self.discovery = SkillChaining(
             self.bank, self.events, gestation=gestation, max_branching=max_branching,
             convergence_threshold=convergence_threshold,

@@ -86,15 +86,12 @@ def gestation_over(bank: OptionBank, episode: Tensor, ended: Tensor,
 @torch.no_grad()
 def initialise_option_values(q_head: LinearQHead, mask: Tensor, value: Tensor,
                              num_primitives: int = NUM_PRIMITIVES) -> None:  # fmt: skip
-    """Set ``Q(s, o_k) = value[p, k]`` for every state, for the slots in ``mask [P, K]``.
-
-    The top-level head holds decisions ``num_primitives + k``; feature 0 must be the constant
-    (true of :class:`~skillchain_torch.features.FourierBasis`).
-    """
-    weights = q_head.weight[:, num_primitives:, :]  # [P, K, F] view
-    init = torch.zeros_like(weights)
-    init[..., 0] = value.to(weights.dtype)
-    weights.copy_(torch.where(mask[..., None], init, weights))
+    """Set ``Q(s, o_k) = value[p, k]`` for every state, for the slots in ``mask [P, K]``,
+    through the head's :meth:`~skillchain_torch.interfaces.ValueHead.set_values` (the top-level
+    head holds decisions ``num_primitives + k``)."""
+    primitives = mask.new_zeros(mask.shape[0], num_primitives)
+    q_head.set_values(torch.cat([primitives, mask], dim=1),
+                      torch.cat([value.new_zeros(primitives.shape), value], dim=1))
 
 
 class RecentStates:

@@ -155,6 +155,23 @@ class LinearQHead(nn.Module):
             mask[:, None], rows + increment.to(rows.dtype), rows
         )
 
+    @torch.no_grad()
+    def set_values(self, mask: Tensor, value: Tensor) -> None:
+        """``Q(s, d) = value[p, d]`` for every state, for the ``(p, d)`` in ``mask [P, D]``
+        (skill chaining's initial ``Q(s, o)`` of a joining option). Feature 0 must be the
+        constant, as :class:`~skillchain_torch.features.FourierBasis`'s ``cos(0) = 1`` is.
+
+        Example:
+            >>> head = LinearQHead(num_features=2, num_decisions=3, population=1)
+            >>> head.set_values(torch.tensor([[False, False, True]]),
+            ...                 torch.tensor([[0.0, 0.0, -7.0]]))
+            >>> head(torch.tensor([[1.0, 0.3]], dtype=torch.float64)).tolist()
+            [[0.0, 0.0, -7.0]]
+        """
+        init = torch.zeros_like(self.weight)
+        init[..., 0] = value.to(self.weight.dtype)
+        self.weight.copy_(torch.where(mask[..., None], init, self.weight))
+
     def extra_repr(self) -> str:
         return (
             f"num_features={self.num_features}, num_decisions={self.num_decisions}, "

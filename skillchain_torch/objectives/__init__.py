@@ -1,10 +1,14 @@
-"""Update rules ("objectives" in TorchRL terms); linear ones apply closed-form TD steps."""
+"""Update rules ("objectives" in TorchRL terms): closed-form TD steps for the linear heads
+(:class:`SarsaUpdate`, :class:`IntraOptionQLearning`) and the same rules as TorchRL loss modules
+(:class:`SMDPSarsaLoss`) for heads trained by an optimizer."""
 
 from skillchain_torch.objectives.q_learning import IntraOptionQLearning, option_td_target
 from skillchain_torch.objectives.sarsa import SarsaUpdate, discount, smdp_td_error
+from skillchain_torch.objectives.smdp_sarsa_loss import SMDPSarsaLoss
 
 __all__ = [
     "IntraOptionQLearning",
+    "SMDPSarsaLoss",
     "SarsaUpdate",
     "discount",
     "option_td_target",
