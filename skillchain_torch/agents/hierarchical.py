@@ -213,11 +213,14 @@ class HierarchicalAgent(nn.Module):
         device = torch.device(bank.status.device if device is None else device)
         self.bank = bank.to(device)
         self.population, self.slots = bank.population, bank.slots
-        self.num_decisions = NUM_PRIMITIVES + self.slots
+        # The environment's sizes, as the option bank was built for them (its specs).
+        self.obs_dim, self.num_primitives = bank.obs_dim, bank.num_actions
+        self.num_decisions = self.num_primitives + self.slots
         self.order = int(order)
-        self.features = (FourierBasis(OBS_DIM, order) if features is None else features).to(device)
-        num_features = self.features(torch.zeros(self.population, OBS_DIM, dtype=torch.float64,
-                                                 device=device)).shape[-1]  # fmt: skip
+        self.features = (FourierBasis(self.obs_dim, order) if features is None
+                         else features).to(device)  # fmt: skip
+        num_features = self.features(torch.zeros(self.population, self.obs_dim,
+                                                 dtype=torch.float64, device=device)).shape[-1]
         self.q_head = (LinearQHead(num_features, self.num_decisions, self.population,
                                    device=device) if q_head is None else q_head.to(device))
         self.native = _native.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES, {
@@ -258,7 +261,7 @@ class HierarchicalAgent(nn.Module):
         i64 = dict(dtype=torch.int64, device=device)
         # Per-agent episode state (all P rows; only the active ones change). Plain attributes,
         # not buffers: they are replaced every step and saved by ``state_dict`` explicitly.
-        self.obs = torch.zeros(P, OBS_DIM, **f64)  # current s
+        self.obs = torch.zeros(P, self.obs_dim, **f64)  # current s
         self.option_code = bank.q_head.encode(self.obs)  # the option heads' code of s
         self.contains = torch.zeros(P, self.slots, dtype=torch.bool, device=device)  # s in I_k
         self.decision_phi = torch.zeros(P, num_features, **f64)  # phi(s_decision)
@@ -302,7 +305,7 @@ class HierarchicalAgent(nn.Module):
     def top_level_available(self, obs: Tensor, contains: Tensor | None = None) -> Tensor:
         """``[P, 5 + K]``: the primitives (always) and the available options at ``obs``."""
         options = self.bank.available(obs, contains)
-        primitives = torch.ones(self.population, NUM_PRIMITIVES, dtype=torch.bool,
+        primitives = torch.ones(self.population, self.num_primitives, dtype=torch.bool,
                                 device=options.device)
         return torch.cat([primitives, options], dim=-1)
 
@@ -358,12 +361,12 @@ class HierarchicalAgent(nn.Module):
         rows = torch.ones_like(self.active) if rows is None else rows
         if self.native:
             q, decision = _native.choose(self.q_head.weight, phi, available, rows,
-                                         NUM_PRIMITIVES, uniforms, self.epsilon)  # fmt: skip
+                                         self.num_primitives, uniforms, self.epsilon)  # fmt: skip
             self.last_phi, self.last_q, self.last_available = phi, q, available
             return phi, decision
         # Value only what can be chosen: the primitives, and the few options whose initiation
         # set holds the state (each value is the same row sum as a full forward).
-        q = self.q_head.forward_mask(phi, available & rows[:, None], dense=NUM_PRIMITIVES)
+        q = self.q_head.forward_mask(phi, available & rows[:, None], dense=self.num_primitives)
         self.last_phi, self.last_q, self.last_available = phi, q, available
         return phi, epsilon_greedy(q, available, self.epsilon, uniforms,
                                    check=False)  # primitives are always available
@@ -376,7 +379,7 @@ class HierarchicalAgent(nn.Module):
                                       self.decision, self.option, uniforms, self.option_epsilon,
                                       self.action.clone())  # fmt: skip
             return
-        action = self.decision.clamp(max=NUM_PRIMITIVES - 1)
+        action = self.decision.clamp(max=self.num_primitives - 1)
         executing = rows & (self.option >= 0)
         index = executing.nonzero()[:, 0]
         if index.numel() > 0:  # only the executing rows' option values (a row's own sums)
@@ -416,7 +419,7 @@ class HierarchicalAgent(nn.Module):
         """Rows ``rows [P]`` take ``decision [P]`` with features ``phi [P, F]``, or with
         ``index`` (the rows' ids) ``phi [len(index), F]``."""
         self.decision = torch.where(rows, decision, self.decision)
-        option = torch.where(decision >= NUM_PRIMITIVES, decision - NUM_PRIMITIVES,
+        option = torch.where(decision >= self.num_primitives, decision - self.num_primitives,
                              torch.full_like(decision, -1))
         self.option = torch.where(rows, option, self.option)
         if index is None:
@@ -426,7 +429,7 @@ class HierarchicalAgent(nn.Module):
         self.decision_return = torch.where(rows, torch.zeros_like(self.decision_return),
                                            self.decision_return)
         self.duration = torch.where(rows, torch.zeros_like(self.duration), self.duration)
-        self._options_starting(rows & (decision >= NUM_PRIMITIVES))
+        self._options_starting(rows & (decision >= self.num_primitives))
 
     def _options_starting(self, rows: Tensor) -> None:
         """Agents ``rows [P]`` just took an option as their new decision (a hook: skill
@@ -498,7 +501,7 @@ class HierarchicalAgent(nn.Module):
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
         if self.failure_bootstrap == "primitives":  # a timeout: the best primitive at s'
             timed_out = option_stops & ~hit
-            best_primitive = self.last_q[:, :NUM_PRIMITIVES].max(1).values
+            best_primitive = self.last_q[:, :self.num_primitives].max(1).values
             q_next = torch.where(timed_out, best_primitive, q_next)
         if self.intra_option_primitives:  # the option's primitive, one Q-learning step at s
             self.learn(self.state_phi, self.action, reward, torch.ones_like(self.duration),

@@ -102,6 +102,7 @@ def resolve(bank, native: bool | None, completion_reward, num_primitives: int,
         "the compiled kernels (built)": AVAILABLE and native_initiation.AVAILABLE,
         "the CPU": bank.status.device.type == "cpu",
         f"{num_primitives} option actions": head.num_actions == num_primitives,
+        "a 4-d observation": bank.obs_dim == 4,
         "float64 option heads": not exact or head.weight.dtype == torch.float64,
         "a float completion_reward": not isinstance(completion_reward, Tensor),
     }

@@ -62,7 +62,7 @@ class ExecutionTrace:
         population: P; max_steps: the longest execution (paper: 250).
         q_head: the options' :class:`~skillchain_torch.options.OptionQHead` (for the snapshot).
 
-    State (:meth:`state_dict`): ``states [P, max_steps, 4]`` and ``snapshot`` (the Q-head
+    State (:meth:`state_dict`): ``states [P, max_steps, D]`` and ``snapshot`` (the Q-head
     slot of the executing option at its start, per agent).
     """
 
@@ -70,7 +70,7 @@ class ExecutionTrace:
                  dtype=torch.float64, device=None):  # fmt: skip
         self.max_steps = int(max_steps)
         self.q_head = q_head
-        self.states = torch.zeros(population, self.max_steps, OBS_DIM, dtype=dtype,
+        self.states = torch.zeros(population, self.max_steps, q_head.obs_dim, dtype=dtype,
                                   device=device)  # fmt: skip
         slot = torch.zeros(population, dtype=torch.int64, device=device)
         self.snapshot = q_head.read_slots(slot)
@@ -92,7 +92,8 @@ class ExecutionTrace:
 
     def record(self, rows: Tensor, step: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` as step ``step [P]`` (0-based)."""
-        if self.states.dtype == torch.float64 and native_discovery.applies(self.states, rows):
+        if (self.states.dtype == torch.float64 and self.states.shape[-1] == OBS_DIM
+                and native_discovery.applies(self.states, rows)):  # fmt: skip
             native_discovery.record(self.states, rows, step, obs)
             return
         index = rows.nonzero()[:, 0]
@@ -120,7 +121,8 @@ class ExecutionTrace:
 
         A compiled classifier stores them straight from the trace (the same examples in the
         same order, so the same stores)."""
-        if classifier.native and self.states.dtype == torch.float64:
+        if (classifier.native and self.states.dtype == torch.float64
+                and self.states.shape[-1] == OBS_DIM):  # fmt: skip
             touched = torch.zeros(classifier.population, classifier.slots, dtype=torch.bool)
             native_initiation.store_executions(classifier, self.states, slot, duration,
                                                success, failure, touched)  # fmt: skip

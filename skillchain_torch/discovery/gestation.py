@@ -112,11 +112,12 @@ class RecentStates:
         ([0, 0, 0, 1], [1.0, 2.0, 3.0, 0.0])
     """
 
-    def __init__(self, population: int, length: int, dtype=torch.float64, device=None):
+    def __init__(self, population: int, length: int, dtype=torch.float64, device=None,
+                 obs_dim: int = 4):  # fmt: skip
         if length < 1:
             raise ValueError(f"RecentStates needs length >= 1, got {length}")
         self.length = int(length)
-        self.states = torch.zeros(population, self.length, 4, dtype=dtype, device=device)
+        self.states = torch.zeros(population, self.length, obs_dim, dtype=dtype, device=device)
         self.steps = torch.zeros(population, dtype=torch.int64, device=device)  # this episode
 
     def record(self, rows: Tensor, obs: Tensor) -> None:
@@ -154,9 +155,15 @@ class RecentStates:
         self.steps = state["steps"].to(device).clone()
 
 
+def observation_box(dim: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """``(low, high)`` of the observation: Pinball's (its velocities reach past [0, 1]) for 4
+    dims, the unit box (an env's observation scaled by its bounds) otherwise."""
+    return (_OBS_LOW, _OBS_HIGH) if dim == 4 else ((0.0,) * dim, (1.0,) * dim)
+
+
 def value_projection(top: FourierBasis, option: FourierBasis, points: int = 7,
-                     low: tuple[float, ...] = _OBS_LOW,
-                     high: tuple[float, ...] = _OBS_HIGH) -> Tensor:  # fmt: skip
+                     low: tuple[float, ...] | None = None,
+                     high: tuple[float, ...] | None = None) -> Tensor:  # fmt: skip
     """``[F_option, F_top]``: least-squares map from top-level weights to option weights.
 
     A linear value ``w . phi_top(s)`` is fitted by ``(M w) . phi_option(s)`` over a regular grid
@@ -172,6 +179,8 @@ def value_projection(top: FourierBasis, option: FourierBasis, points: int = 7,
         >>> round(float((M @ w)[0]), 9), round(float((M @ w)[1:].abs().max()), 9)
         (3.0, 0.0)
     """
+    low = observation_box(top.dim)[0] if low is None else low
+    high = observation_box(top.dim)[1] if high is None else high
     if top.dim != option.dim or len(low) != top.dim or len(high) != top.dim or points < 2:
         raise ValueError(f"value_projection needs bases of one dimension matching low/high "
                          f"and points >= 2, got dims {top.dim}, {option.dim}, points {points}")
@@ -247,8 +256,10 @@ class StateValueFit:
     BLOCK = 128  # grid states (or output features) per product
 
     def __init__(self, basis: FourierBasis, points: int = 7,
-                 low: tuple[float, ...] = _OBS_LOW,
-                 high: tuple[float, ...] = _OBS_HIGH):  # fmt: skip
+                 low: tuple[float, ...] | None = None,
+                 high: tuple[float, ...] | None = None):  # fmt: skip
+        box = observation_box(basis.dim)
+        low, high = box[0] if low is None else low, box[1] if high is None else high
         dtype = basis.coefficients.dtype
         axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
         grid = torch.cartesian_prod(*axes).to(basis.coefficients.device)

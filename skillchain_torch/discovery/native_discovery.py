@@ -35,6 +35,9 @@ __all__ = ["NATIVE", "applies", "target_indicator", "event_list", "exclude_overl
 NATIVE = _c is not None
 
 
+OBS_DIM = 4  # the ring and trace kernels copy Pinball's 4 numbers a state
+
+
 def applies(*tensors: Tensor) -> bool:
     """The compiled path is on and every tensor is on the CPU."""
     if not NATIVE:
@@ -96,6 +99,7 @@ def record_ring(states: Tensor, steps: Tensor, rows: Tensor, obs: Tensor) -> boo
     ``states [P, L, 4]`` is contiguous CPU float64 and ``steps`` contiguous int64; ``False``
     (nothing done) otherwise."""
     if not (states.dtype == torch.float64 and steps.dtype == torch.int64
+            and states.shape[-1] == OBS_DIM  # the kernel copies 4 numbers a state
             and states.is_contiguous() and steps.is_contiguous()
             and applies(states, steps, rows, obs)):  # fmt: skip
         return False

@@ -188,7 +188,7 @@ class SkillChaining:
         self.log: list[DiscoveryEvent] = []
         # The states each agent acted in this episode, for gestation positives (if any).
         n = reading.gestation_positives
-        self.recent = RecentStates(P, n, device=device) if n > 0 else None
+        self.recent = RecentStates(P, n, device=device, obs_dim=bank.obs_dim) if n > 0 else None
         self._base_next = self.base_now
         self._exclusion: Tensor | None = None
         # Reused CPU arrays for what the compiled outcomes and triggers write and the step
@@ -426,7 +426,7 @@ class SkillChaining:
             self._start_sets(join)
             value = torch.nan_to_num(self.gestation_q, neginf=0.0)
             bank.set_status(join, OptionStatus.LEARNING)
-            initialise_option_values(q_head, join, value)
+            initialise_option_values(q_head, join, value, q_head.num_decisions - bank.slots)
             if self.value_start == "agent":
                 self._agent_values(q_head, join)
             if self.policy_start == "top-level":

@@ -92,11 +92,15 @@ class OptionBank(nn.Module):
     @classmethod
     def build(cls, population: int, slots: int = 8, order: int = 3, alpha: float = 0.0005,
               seed: int | Tensor = 0, device: torch.device | str | None = None,
+              obs_dim: int = 4, num_actions: int = 5,
               **classifier_kwargs: Any) -> OptionBank:  # fmt: skip
-        """The paper's bank: Fourier option heads and default classifiers."""
-        q_head = FourierOptionQHead(population, slots, order=order, alpha=alpha, device=device)
+        """The paper's bank: Fourier option heads and default classifiers, for an
+        environment with ``obs_dim`` observation dims (in ``[0, 1]``) and ``num_actions``
+        primitive actions (Pinball's 4 and 5 by default)."""
+        q_head = FourierOptionQHead(population, slots, order=order, alpha=alpha, device=device,
+                                    obs_dim=obs_dim, num_actions=num_actions)  # fmt: skip
         classifier = InitiationClassifier(population, slots, seed=seed, device=device,
-                                          **classifier_kwargs)  # fmt: skip
+                                          obs_dim=obs_dim, **classifier_kwargs)  # fmt: skip
         return cls(population, slots, q_head, classifier)
 
     # ------------------------------------------------------------------------------- queries

@@ -126,6 +126,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
         seed: int | Tensor = 0,
         dtype: torch.dtype | str = torch.float64,
         device: torch.device | str | None = None,
+        obs_dim: int = OBS_DIM,
     ):
         super().__init__()
         dtype = _DTYPES[dtype] if isinstance(dtype, str) else dtype
@@ -133,11 +134,12 @@ class InitiationClassifier(ExampleStores, nn.Module):
             raise ValueError("need population, slots, capacity >= 1 and sweeps >= 0")
         if replacement not in REPLACEMENTS:
             raise ValueError(f"replacement must be one of {REPLACEMENTS}, got {replacement!r}")
-        dims = tuple(range(OBS_DIM)) if distance_dims is None else tuple(distance_dims)
-        if not dims or any(d < 0 or d >= OBS_DIM for d in dims):
-            raise ValueError(f"distance_dims must be indices of the 4-d observation, got {dims}")
+        dims = tuple(range(obs_dim)) if distance_dims is None else tuple(distance_dims)
+        if not dims or any(d < 0 or d >= obs_dim for d in dims):
+            raise ValueError(f"distance_dims must be indices of the {obs_dim}-d observation, "
+                             f"got {dims}")  # fmt: skip
         self.population, self.slots, self.capacity = population, slots, capacity
-        self.obs_dim = OBS_DIM
+        self.obs_dim = int(obs_dim)
         self.lr, self.sweeps, self.distance = float(lr), int(sweeps), float(distance)
         self.distance_dims, self.replacement = dims, replacement
         self.balanced = bool(balanced)
@@ -148,8 +150,10 @@ class InitiationClassifier(ExampleStores, nn.Module):
             replacement=replacement, keep_negatives=self.keep_negatives, balanced=self.balanced,
             initial_bias=float(initial_bias), centered=bool(centered), dtype=dtype_name(dtype),
         )  # fmt: skip
+        if self.obs_dim != OBS_DIM:  # (Pinball's files keep their config as it was)
+            self.config["obs_dim"] = self.obs_dim
         self.initial_bias, self.centered = float(initial_bias), bool(centered)
-        self.features = PolynomialFeatures(OBS_DIM, degree, dtype=dtype).to(device)
+        self.features = PolynomialFeatures(self.obs_dim, degree, dtype=dtype).to(device)
         self.num_features = self.features.num_features
         pk = (population, slots)
         zeros = torch.zeros
@@ -157,7 +161,8 @@ class InitiationClassifier(ExampleStores, nn.Module):
                                    requires_grad=False)  # fmt: skip
         self.bias = nn.Parameter(torch.full(pk, self.initial_bias, dtype=dtype, device=device),
                                  requires_grad=False)  # fmt: skip
-        self.register_buffer("examples", zeros(*pk, capacity, OBS_DIM, dtype=dtype, device=device))
+        self.register_buffer("examples", zeros(*pk, capacity, self.obs_dim, dtype=dtype,
+                                               device=device))  # fmt: skip
         self.register_buffer("labels", zeros(*pk, capacity, dtype=torch.bool, device=device))
         for name in ("count", "seen", "generation", "sweeps_done"):
             self.register_buffer(name, zeros(pk, dtype=torch.int64, device=device))
@@ -182,6 +187,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
         w = self.weight
         self.native = compiled(native, {
             "the compiled classifier (built)": native_initiation.AVAILABLE,
+            f"a {OBS_DIM}-d observation": self.obs_dim == OBS_DIM,
             f"the classifier on the CPU in float64 (it is on {w.device}, {w.dtype})":
                 w.device.type == "cpu" and w.dtype == torch.float64,
         }, builtin_type_problems({"the initiation classifier": (self, InitiationClassifier)}))

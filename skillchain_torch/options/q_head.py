@@ -49,7 +49,7 @@ class OptionQHead(nn.Module, ABC):
     """Interface of an option Q-head: ``Q_k(s, a)`` for every agent p and slot k.
 
     Attributes:
-        population (P), slots (K), num_actions (A).
+        population (P), slots (K), num_actions (A), obs_dim (D, the observation size).
         config: the constructor's keyword arguments (plain Python values), used to rebuild the
             head when an :class:`~skillchain_torch.options.OptionBank` is loaded.
 
@@ -62,11 +62,13 @@ class OptionQHead(nn.Module, ABC):
     population: int
     slots: int
     num_actions: int
+    obs_dim: int = OBS_DIM
     config: dict[str, Any]
 
     def _check_obs(self, obs: Tensor) -> None:
-        if tuple(obs.shape) != (self.population, OBS_DIM):
-            raise ValueError(f"obs must be [P={self.population}, 4], got {tuple(obs.shape)}")
+        if tuple(obs.shape) != (self.population, self.obs_dim):
+            raise ValueError(f"obs must be [P={self.population}, {self.obs_dim}], got "
+                             f"{tuple(obs.shape)}")  # fmt: skip
 
     def _check_update(self, obs: Tensor, action: Tensor, target: Tensor, mask: Tensor) -> Tensor:
         self._check_obs(obs)
@@ -204,18 +206,22 @@ class FourierOptionQHead(OptionQHead):
         alpha: float = 0.0005,
         dtype: torch.dtype | str = torch.float64,
         device: torch.device | str | None = None,
+        obs_dim: int = OBS_DIM,
     ):
         super().__init__()
         dtype = _DTYPES[dtype] if isinstance(dtype, str) else dtype
-        if population < 1 or slots < 1 or num_actions < 1:
-            raise ValueError("population, slots and num_actions must be >= 1")
+        if population < 1 or slots < 1 or num_actions < 1 or obs_dim < 1:
+            raise ValueError("population, slots, num_actions and obs_dim must be >= 1")
         self.population, self.slots, self.num_actions = population, slots, num_actions
+        self.obs_dim = int(obs_dim)
         self.alpha = float(alpha)
         self.config = dict(
             population=population, slots=slots, order=order, num_actions=num_actions,
             alpha=self.alpha, dtype=dtype_name(dtype),
         )  # fmt: skip
-        self.basis = FourierBasis(OBS_DIM, order, dtype=dtype).to(device)
+        if self.obs_dim != OBS_DIM:  # (Pinball's files keep their config as it was)
+            self.config["obs_dim"] = self.obs_dim
+        self.basis = FourierBasis(self.obs_dim, order, dtype=dtype).to(device)
         self.num_features = self.basis.num_features
         shape = (population, slots, num_actions, self.num_features)
         self.register_buffer("weight", torch.zeros(shape, dtype=dtype, device=device))
@@ -286,8 +292,9 @@ class FourierOptionQHead(OptionQHead):
         return new
 
 
-def _mlp(hidden: int, layers: int, num_actions: int, dtype: torch.dtype) -> nn.Sequential:
-    sizes = [OBS_DIM] + [hidden] * layers
+def _mlp(hidden: int, layers: int, num_actions: int, dtype: torch.dtype,
+         obs_dim: int = OBS_DIM) -> nn.Sequential:  # fmt: skip
+    sizes = [obs_dim] + [hidden] * layers
     modules: list[nn.Module] = []
     for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
         modules += [nn.Linear(fan_in, fan_out, dtype=dtype, device="meta"), nn.Tanh()]
@@ -330,19 +337,23 @@ class MLPOptionQHead(OptionQHead):
         seed: int | Tensor = 0,
         dtype: torch.dtype | str = torch.float64,
         device: torch.device | str | None = None,
+        obs_dim: int = OBS_DIM,
     ):
         super().__init__()
         dtype = _DTYPES[dtype] if isinstance(dtype, str) else dtype
         if population < 1 or slots < 1 or num_actions < 1 or hidden < 1 or layers < 1:
             raise ValueError("population, slots, num_actions, hidden, layers must be >= 1")
         self.population, self.slots, self.num_actions = population, slots, num_actions
+        self.obs_dim = int(obs_dim)
         self.lr, self.q_scale = float(lr), float(q_scale)
         self._dtype = dtype
         self.config = dict(
             population=population, slots=slots, hidden=hidden, layers=layers,
             num_actions=num_actions, lr=self.lr, q_scale=self.q_scale, dtype=dtype_name(dtype),
         )  # fmt: skip
-        template = _mlp(hidden, layers, num_actions, dtype)
+        if self.obs_dim != OBS_DIM:
+            self.config["obs_dim"] = self.obs_dim
+        template = _mlp(hidden, layers, num_actions, dtype, self.obs_dim)
         object.__setattr__(self, "_template", template)  # not a submodule: no own state
         # One network's stacked layout ([1, ...] per parameter) widened to [P, K, ...].
         layout, _ = stack_module_state([template])
@@ -375,7 +386,7 @@ class MLPOptionQHead(OptionQHead):
     def _inputs(self, obs: Tensor) -> Tensor:
         self._check_obs(obs)
         x = obs.to(self._dtype) * 2.0 - 1.0  # observations in [0, 1] -> [-1, 1]
-        return x[:, None, :].expand(-1, self.slots, -1).reshape(-1, OBS_DIM)
+        return x[:, None, :].expand(-1, self.slots, -1).reshape(-1, self.obs_dim)
 
     def forward(self, obs: Tensor) -> Tensor:
         q = vmap(self._net)(self._stacked(), self._inputs(obs))

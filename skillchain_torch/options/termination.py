@@ -25,7 +25,6 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.options.initiation import InitiationClassifier
-from skillchain_torch.options.q_head import OBS_DIM
 
 
 @runtime_checkable
@@ -38,8 +37,8 @@ class TerminationPredicate(Protocol):
 
 
 def _check_obs(obs: Tensor) -> None:
-    if obs.ndim != 2 or obs.shape[-1] != OBS_DIM:
-        raise ValueError(f"obs must be [P, 4], got {tuple(obs.shape)}")
+    if obs.ndim != 2:
+        raise ValueError(f"obs must be [P, D], got {tuple(obs.shape)}")
 
 
 class GoalEvent:
@@ -80,8 +79,8 @@ class RegionEvent:
     def __init__(self, center: Sequence[float] | Tensor, radius: float,
                  dims: Sequence[int] = (0, 1), name: str = "region"):  # fmt: skip
         self.dims = tuple(int(d) for d in dims)
-        if not self.dims or any(d < 0 or d >= OBS_DIM for d in self.dims):
-            raise ValueError(f"dims must index the 4-d observation, got {self.dims}")
+        if not self.dims or any(d < 0 for d in self.dims):
+            raise ValueError(f"dims must index the observation, got {self.dims}")
         self.center = torch.as_tensor(center, dtype=torch.float64)
         if self.center.shape[-1] != len(self.dims):
             raise ValueError(f"center has {self.center.shape[-1]} coordinates for dims "
@@ -93,6 +92,9 @@ class RegionEvent:
 
     def __call__(self, obs: Tensor, terminated: Tensor | None = None) -> Tensor:
         _check_obs(obs)
+        if max(self.dims) >= obs.shape[-1]:
+            raise ValueError(f"{self.name}: dims {self.dims} do not index a "
+                             f"{obs.shape[-1]}-d observation")  # fmt: skip
         center = self.center.to(device=obs.device, dtype=obs.dtype)
         diff = obs[:, self.dims] - center
         squared = diff[:, 0] * diff[:, 0]

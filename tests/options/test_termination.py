@@ -63,7 +63,9 @@ def test_region_event_is_a_closed_ball_in_its_dims():
     with pytest.raises(ValueError, match="coordinates"):
         RegionEvent((0.1, 0.2, 0.3), 0.1)
     with pytest.raises(ValueError, match="dims"):
-        RegionEvent((0.1,), 0.1, dims=(4,))
+        RegionEvent((0.1,), 0.1, dims=(-1,))
+    with pytest.raises(ValueError, match=r"dims \(4,\) do not index a 4-d observation"):
+        RegionEvent((0.1,), 0.1, dims=(4,))(obs)
 
 
 def test_initiation_set_event_follows_the_classifier():
