@@ -23,6 +23,8 @@ __all__ = ["build_parser", "CONFIG_OPTIONS"]
 CONFIG_OPTIONS = (
     "agent",
     "map",
+    "env",
+    "obs_bounds",
     "runs",
     "episodes",
     "seed",
@@ -71,6 +73,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--map", default=None, help="Pinball map name (default: pinball_simple_single)"
+    )
+    train.add_argument(
+        "--env", default=None, metavar="gymnasium:ID",
+        help="train on a Gymnasium env through TorchRL's GymEnv instead of Pinball: "
+        "gymnasium:MountainCar-v0, or gymnasium:MODULE:ID for an env your module registers "
+        "(observation size, bounds and action count come from its specs)",
+    )
+    train.add_argument(
+        "--obs-bounds", default=None, metavar="LOW:HIGH,...",
+        help="the observation's bounds, one LOW:HIGH per dim, where the env's spec has none "
+        "(Fourier features and initiation sets live in the unit box)",
     )
     train.add_argument("--runs", type=int, default=None, help="P, independent agents (default 1)")
     train.add_argument(

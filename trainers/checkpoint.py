@@ -130,6 +130,8 @@ def read_checkpoint(path: str | Path) -> dict:
         if not isinstance(state.get(field), dict):
             raise DamagedCheckpoint(f"{path}: field {field!r} is missing or not a dict")
     for section, keys in _SECTIONS.items():
+        if section == "env" and state["env"].get("kind") == "torchrl-envs":
+            keys = ("index", "step_count")  # (EnvStepper: a Gymnasium/TorchRL env's counters)
         for key in keys:
             if key not in state[section]:
                 raise DamagedCheckpoint(f"{path}: field '{section}.{key}' is missing")

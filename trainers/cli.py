@@ -151,8 +151,17 @@ def _config_from_args(parser, args) -> TrainConfig:
         parser.error(f"--agent {agent} does not read " + ", ".join(
             f"{_flag(n)} (only {' or '.join(readers[n]) or 'no agent'})" for n in unread)
             + "; leave them out or choose that --agent")
+    if "env" in given and "map" in given:
+        parser.error("--env and --map choose the environment twice: give one (--map is Pinball's)")
+    if "obs_bounds" in given and "env" not in given:
+        parser.error("--obs-bounds applies to --env only (Pinball's observation is bounded)")
     try:
-        return TrainConfig(**given).validate().resolved()
+        config = TrainConfig(**given)
+        if config.env is not None:  # its sizes (and so the default order) from its specs
+            from .population import with_env_sizes
+
+            config = with_env_sizes(config)
+        return config.validate().resolved()
     except ValueError as err:
         parser.error(_flag_message(err, given))
 

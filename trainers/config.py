@@ -62,6 +62,12 @@ UNREAD_FIELDS = {
 }
 
 
+def env_order(dim: int) -> int:
+    """The default Fourier order off Pinball: the highest up to 4 with ``(order + 1) ** dim
+    <= 10,000`` features (4 for 2-4 dims, 3 for 6, 2 for 8), at least 1."""
+    return max([1] + [o for o in range(1, 5) if (o + 1) ** dim <= 10_000])
+
+
 def paper_defaults(map_name: str) -> tuple[int, float]:
     """``(order, alpha)`` of the paper for a map: (5, 0.0005) on hard maps, else (4, 0.001)."""
     return (5, 0.0005) if "hard" in map_name else (4, 0.001)
@@ -176,6 +182,13 @@ class TrainConfig:
         convergence_threshold: an initiation set is learned (and becomes a target event) when
             its classifier's weights moved on average less than this per episode, twice in a
             row (paper: 0.15).
+        env: ``None`` for Pinball (``map``), else ``"gymnasium:ID"`` or
+            ``"gymnasium:MODULE:ID"``: a Gymnasium env through TorchRL's ``GymEnv`` (see
+            :mod:`skillchain_torch.envs.external`).
+        obs_bounds: ``"LOW:HIGH,..."`` per observation dim, where the env's spec has no
+            finite bounds (``None``: the spec's).
+        obs_dim, num_actions: the env's observation size and action count, read from its
+            specs when the trainer starts (``None``: Pinball's 4 and 5).
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -214,6 +227,15 @@ class TrainConfig:
     value_bonus: float = 0.0
     gestation: int = 2
     convergence_threshold: float = 0.15
+    env: str | None = None
+    obs_bounds: str | None = None
+    obs_dim: int | None = None
+    num_actions: int | None = None
+
+    @property
+    def env_name(self) -> str:
+        """The environment, for display and for saved options: ``env`` or the Pinball map."""
+        return self.map if self.env is None else self.env
 
     @property
     def reading(self):
@@ -222,8 +244,11 @@ class TrainConfig:
                                  self.initiation_constrain, self.one_class_fits)
 
     def resolved(self) -> TrainConfig:
-        """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``)."""
+        """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``; off
+        Pinball, the highest order up to 4 with at most 10,000 features, and alpha 0.001)."""
         order, alpha = paper_defaults(self.map)
+        if self.env is not None:
+            order = env_order(self.obs_dim or 4)
         return dataclasses.replace(
             self,
             order=order if self.order is None else int(self.order),
@@ -253,7 +278,7 @@ class TrainConfig:
         if self.agent not in AGENTS:
             raise ConfigError(f"agent must be one of {', '.join(AGENTS)}, got {self.agent!r}",
                               ("agent",))
-        if self.map not in MAP_NAMES:
+        if self.env is None and self.map not in MAP_NAMES:
             raise ConfigError(f"unknown map {self.map!r}; known maps: {', '.join(MAP_NAMES)}")
         checks = [
             ("runs", self.runs, self.runs >= 1, ">= 1"),
@@ -344,10 +369,11 @@ class TrainConfig:
         and a 500-example initiation-set store (500 x 4 float64 and labels).
         """
         runs, episodes = int(self.runs), int(self.episodes)
-        order = paper_defaults(self.map)[0] if self.order is None else int(self.order)
+        order = self.resolved().order
         chaining = self.agent == "skill-chaining"
-        decisions = 5 + (int(self.slots) if chaining else 0)
-        features = (order + 1) ** 4
+        dim, actions = self.obs_dim or 4, self.num_actions or 5
+        decisions = actions + (int(self.slots) if chaining else 0)
+        features = (order + 1) ** dim
         terms = [
             (("runs", "episodes"), "returns and lengths [runs, episodes]",
              runs * episodes * 8 * (3 if chaining else 2), False),

@@ -38,6 +38,7 @@ import math
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.backends.select import compiled
 from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
@@ -93,23 +94,25 @@ class FlatSarsaAgent(nn.Module):
         super().__init__()
         cfg = config.resolved()
         device = torch.device(cfg.device if device is None else device)
-        if native is None:
-            native = native_sarsa.AVAILABLE and device.type == "cpu"
-        if native and not (native_sarsa.AVAILABLE and device.type == "cpu"):
-            raise ValueError(f"native=True needs the compiled kernels (built: "
-                             f"{native_sarsa.AVAILABLE}) and the CPU (got {device})")
-        self.native = bool(native)
+        self.native = compiled(native, {
+            "the compiled kernels (built)": native_sarsa.AVAILABLE,
+            f"the CPU (got {device})": device.type == "cpu",
+            "Pinball's 4-d observation and 5 actions":
+                cfg.obs_dim in (None, OBS_DIM) and cfg.num_actions in (None, NUM_ACTIONS),
+        })
         self.config = cfg
         self.population = cfg.runs
-        self.num_actions = NUM_ACTIONS
-        self.features = FourierBasis(OBS_DIM, cfg.order).to(device)
-        self.q_head = LinearQHead(self.features.num_features, NUM_ACTIONS, cfg.runs,
+        # The environment's sizes (its specs; Pinball's 4 and 5 when not given).
+        self.num_actions = NUM_ACTIONS if cfg.num_actions is None else int(cfg.num_actions)
+        self.obs_dim = OBS_DIM if cfg.obs_dim is None else int(cfg.obs_dim)
+        self.features = FourierBasis(self.obs_dim, cfg.order).to(device)
+        self.q_head = LinearQHead(self.features.num_features, self.num_actions, cfg.runs,
                                   device=device)
         self.policy = EpsilonGreedy(cfg.epsilon)
         scale = self.features.step_size_scale() if cfg.scale_step_size else None
         self.update = SarsaUpdate(cfg.alpha, cfg.gamma, step_size_scale=scale).to(device)
         self.rng = CounterRNG.from_seed(cfg.seed, cfg.runs, stream=AGENT_STREAM, device=device)
-        self._powers = (2 ** torch.arange(NUM_ACTIONS, device=device))[:, None]  # [D, 1]
+        self._powers = (2 ** torch.arange(self.num_actions, device=device))[:, None]  # [D, 1]
         # The hot path's state lives in a plain object: setting attributes of an nn.Module
         # costs microseconds, several times per step.
         w = self._work = _Work()
@@ -143,8 +146,8 @@ class FlatSarsaAgent(nn.Module):
             return (w.w[:, rows] * phi[None]).sum(-1)
         if w.n < CHUNK_ROWS:
             return torch.mul(w.w, phi[None], out=w.prod).sum(-1)
-        q = torch.empty(NUM_ACTIONS, w.n, dtype=phi.dtype, device=phi.device)
-        for d in range(NUM_ACTIONS):
+        q = torch.empty(self.num_actions, w.n, dtype=phi.dtype, device=phi.device)
+        for d in range(self.num_actions):
             torch.sum(torch.mul(w.w[d], phi, out=w.prod), -1, out=q[d])
         return q
 
@@ -184,7 +187,7 @@ class FlatSarsaAgent(nn.Module):
         block = stream.uniform(NUM_UNIFORMS * BLOCK_DECISIONS)  # u0, u1, u0, u1, ...
         w.explore = block[:, 0::2] < w.epsilon
         w.u1 = block[:, 1::2]
-        w.table = decision_table(w.explore, w.u1, NUM_ACTIONS)
+        w.table = decision_table(w.explore, w.u1, self.num_actions)
 
     def _counters(self) -> Tensor:
         """Draws consumed so far by the active rows."""
@@ -311,9 +314,9 @@ class FlatSarsaAgent(nn.Module):
         w = self._work
         w.index, w.n = index, int(index.numel())
         w.w = weight[index].transpose(0, 1).contiguous()  # [D, n, F]
-        w.w_flat = w.w.view(NUM_ACTIONS * w.n, weight.shape[-1])
+        w.w_flat = w.w.view(self.num_actions * w.n, weight.shape[-1])
         w.arange = torch.arange(w.n, device=weight.device)
-        w.table_rows = w.arange * (1 << NUM_ACTIONS)
+        w.table_rows = w.arange * (1 << self.num_actions)
         w.prod = torch.empty_like(w.w if w.n < CHUNK_ROWS else w.w[0])
         self._refill(self.rng.counter[index].clone() if base is None else base)
 

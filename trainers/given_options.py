@@ -36,7 +36,9 @@ logger = logging.getLogger(__name__)
 
 def load_given_options(path, population: int, seed: int = 0,
                        device: torch.device | str | None = None,
-                       agent: int | None = 0, map: str | None = None) -> OptionBank:  # fmt: skip
+                       agent: int | None = 0, map: str | None = None,
+                       obs_dim: int | None = None,
+                       num_actions: int | None = None) -> OptionBank:  # fmt: skip
     """Saved agent ``agent``'s options from ``path`` replicated ``population`` times (or, with
     ``agent=None``, saved agent ``p mod N`` for agent p), reseeded ``seed + p``.
 
@@ -47,7 +49,8 @@ def load_given_options(path, population: int, seed: int = 0,
     or action count than Pinball's, or an ``agent`` the file does not hold."""
     seeds = torch.arange(population, dtype=torch.int64) + int(seed)
     saved = OptionBank.load(path, device=device)
-    saved.check_environment(path, map=map, obs_dim=OBS_DIM, num_actions=NUM_ACTIONS)
+    saved.check_environment(path, map=map, obs_dim=obs_dim or OBS_DIM,
+                            num_actions=num_actions or NUM_ACTIONS)  # fmt: skip
     if saved.legacy and map is not None:
         logger.warning("%s records no map (saved before option banks did): cannot check that "
                        "its options were learned on %s", path, map)
@@ -105,7 +108,8 @@ class GivenOptionsAgent(HierarchicalAgent):
             raise ValueError("the given-options agent needs an options file (--options PATH)")
         device = torch.device(cfg.device if device is None else device)
         bank = load_given_options(path, cfg.runs, cfg.seed, device=device,
-                                  agent=cfg.options_agent, map=cfg.map)
+                                  agent=cfg.options_agent, map=cfg.env_name,
+                                  obs_dim=cfg.obs_dim, num_actions=cfg.num_actions)
         super().__init__(bank, order=cfg.order, alpha=cfg.alpha, gamma=cfg.gamma,
                          epsilon=cfg.epsilon, seed=cfg.seed,
                          scale_step_size=cfg.scale_step_size, device=device,

@@ -44,7 +44,8 @@ def population_interval(values) -> tuple[float, float, float]:
 
 
 def experiment_name(config) -> str:
-    return f"{config.agent}_{config.map}_P{config.runs}_seed{config.seed}"
+    name = config.env_name.replace(":", "-").replace("/", "-")
+    return f"{config.agent}_{name}_P{config.runs}_seed{config.seed}"
 
 
 def log_config(logger, config) -> None:

@@ -68,17 +68,25 @@ VELOCITIES = (-1.0, -0.5, 0.0, 0.5, 1.0)
 
 
 def probe_observations(resolution: int = 50, velocities=VELOCITIES,
-                       dtype: torch.dtype = torch.float64, device=None) -> Tensor:
+                       dtype: torch.dtype = torch.float64, device=None, dim: int = 4) -> Tensor:
     """Observations ``[R * R * V * V, 4]`` of a Figure-5 probe grid.
 
     Positions are the centres of an ``R x R`` grid on the unit board, velocities every pair of
     ``velocities`` (raw, mapped to the descriptor ``(v + 1) / 2``). The order is
     ``(y, x, xdot, ydot)`` from slowest to fastest, so a result reshaped to
     ``[R, R, V * V]`` is indexed ``[row = y, column = x, velocity pair]``.
+
+    Off Pinball (``dim != 4``) the grid spans observation dims 0 and 1 of the unit box and the
+    other dims sit at the centre, 0.5: ``[R * R, dim]``, a slice of the set.
     """
     if resolution < 1:
         raise ValueError(f"resolution must be >= 1, got {resolution}")
     centres = (torch.arange(resolution, dtype=dtype, device=device) + 0.5) / resolution
+    if dim != 4:
+        y, x = torch.meshgrid(centres, centres, indexing="ij")
+        rest = torch.full((resolution * resolution, max(dim - 2, 0)), 0.5, dtype=dtype,
+                          device=device)  # fmt: skip
+        return torch.cat([x.reshape(-1, 1), y.reshape(-1, 1), rest], dim=1)[:, :dim]
     vel = (torch.as_tensor(velocities, dtype=dtype, device=device) + 1.0) / 2.0
     y, x, vx, vy = torch.meshgrid(centres, centres, vel, vel, indexing="ij")
     return torch.stack([x, y, vx, vy], dim=-1).reshape(-1, 4)
@@ -124,7 +132,7 @@ def initiation_density(classifier_or_bank, agent: int = 0, slot: int = 0,
         raise ValueError(f"agent {agent}, slot {slot} out of range for P={clf.population}, "
                          f"K={clf.slots}")
     obs = probe_observations(resolution, velocities, dtype=clf.weight.dtype,
-                             device=clf.weight.device)
+                             device=clf.weight.device, dim=clf.obs_dim)
     member = contains_many(clf, agent, slot, obs).reshape(resolution, resolution, -1)
     return member.to(torch.float64).mean(-1).cpu().numpy()
 
@@ -326,6 +334,7 @@ class OptionMonitor:
         clf = bank.classifier
         if self._probe is None:
             self._probe = probe_observations(self.probe_resolution, dtype=clf.weight.dtype,
+                                             dim=clf.obs_dim,
                                              device=clf.weight.device)
         live = bank.live().cpu().numpy()
         out = np.full(live.shape, np.nan)

@@ -34,6 +34,7 @@ weights, so the last one written is good, and saves the returns so far as
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -43,10 +44,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skillchain_torch.envs.external import make_env, read_specs
 from skillchain_torch.envs.pinball import PinballEnv
 
 from .agents import make_agent
 from .config import TrainConfig
+from .env_stepper import EnvStepper
 from .stepper import SCALAR_MAX, ActiveEnvStepper
 
 __all__ = ["PopulationTrainer", "EpisodeBatch", "STAGES", "Diverged", "DIVERGED_OUTPUTS"]
@@ -82,6 +85,17 @@ class EpisodeBatch:
     lengths: list[int]
     terminated: list[bool]
     population_episode: int | None
+
+
+def with_env_sizes(config: TrainConfig, sizes=None) -> TrainConfig:
+    """``config`` with ``obs_dim`` and ``num_actions`` read from its env's specs (Pinball's
+    config is returned as it is). ``ValueError`` (one line) for an env that cannot be made or
+    whose specs do not fit."""
+    if config.env is None:
+        return config
+    if sizes is None:
+        sizes = read_specs(make_env(config.env), config.obs_bounds)
+    return dataclasses.replace(config, obs_dim=sizes.obs_dim, num_actions=sizes.num_actions)
 
 
 def _per_agent(module, population: int, names: tuple[str, ...] = ("weight",)) -> list:
@@ -128,15 +142,24 @@ class PopulationTrainer:
     def __init__(self, config: TrainConfig, out_dir: str | Path | None = None,
                  scalar_max: int = SCALAR_MAX, num_threads: int | None = 1,
                  native: bool | None = None, agent=None):
+        if config.env is not None:  # the env's sizes from its specs, before the defaults
+            envs = [make_env(config.env) for _ in range(config.runs)]
+            sizes = read_specs(envs[0], config.obs_bounds)
+            config = with_env_sizes(config, sizes)
         config = config.resolved().validate()
         self.config = config
         self.out_dir = None if out_dir is None else Path(out_dir)
         self.num_threads = num_threads
         self.device = torch.device(config.device)
-        self.env = PinballEnv(config.map, batch_size=[config.runs], device=self.device,
-                              dtype=torch.float64, max_episode_steps=config.max_episode_steps,
-                              seed=config.seed)
-        self.stepper = ActiveEnvStepper(self.env, scalar_max=scalar_max, native=native)
+        if config.env is None:
+            self.env = PinballEnv(config.map, batch_size=[config.runs], device=self.device,
+                                  dtype=torch.float64, max_episode_steps=config.max_episode_steps,
+                                  seed=config.seed)  # fmt: skip
+            self.stepper = ActiveEnvStepper(self.env, scalar_max=scalar_max, native=native)
+        else:
+            self.env = envs
+            self.stepper = EnvStepper(envs, sizes, seed=config.seed,
+                                      max_episode_steps=config.max_episode_steps)
         if agent is None:
             agent = make_agent(config, device=self.device, native=native)
         elif int(agent.population) != config.runs:
@@ -145,7 +168,7 @@ class PopulationTrainer:
         self.agent = agent
         bank = getattr(self.agent, "bank", None)
         if bank is not None and bank.map is None and not bank.legacy:
-            bank.map = config.map  # saved with the options (a run on another map refuses them)
+            bank.map = config.env_name  # saved with the options (another env refuses them)
         self.diverged: Diverged | None = None
         P, E = config.runs, config.episodes
         self.returns = np.full((P, E), np.nan)
@@ -490,7 +513,7 @@ class PopulationTrainer:
 
     def __repr__(self) -> str:
         c = self.config
-        return (f"PopulationTrainer(agent={c.agent!r}, map={c.map!r}, runs={c.runs}, "
+        return (f"PopulationTrainer(agent={c.agent!r}, env={c.env_name!r}, runs={c.runs}, "
                 f"episodes={c.episodes}, seed={c.seed}, active={self.num_active})")
 
 

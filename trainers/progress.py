@@ -47,7 +47,7 @@ class ProgressBar:
         cfg = trainer.config
         done = int(trainer.episodes_done.sum())
         self.bar = tqdm(total=cfg.runs * cfg.episodes, initial=done, unit="ep",
-                        desc=f"{cfg.agent} {cfg.map}", dynamic_ncols=True, **self.tqdm_kwargs)
+                        desc=f"{cfg.agent} {cfg.env_name}", dynamic_ncols=True, **self.tqdm_kwargs)
 
     def post_episodes(self, trainer, batch) -> None:
         self.recent.extend(batch.returns)

@@ -85,7 +85,7 @@ def train_and_write(trainer, out: Path, quiet: bool) -> int:
     save_learning_curve(
         trainer.returns,
         out / "learning_curve.png",
-        title=f"{cfg.agent} on {cfg.map} ({cfg.runs} runs)",
+        title=f"{cfg.agent} on {cfg.env_name} ({cfg.runs} runs)",
     )
     info = {
         "wall_time_s": trainer.elapsed,
@@ -151,6 +151,8 @@ def write_discovery(trainer, discovery, out: Path) -> None:
     trainer.agent.bank.save(out / "options.pt")
     np.save(out / "n_options.npy", discovery.n_options)
     (out / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent), indent=1) + "\n")
+    if trainer.config.env is not None:  # Figure 4b is drawn on the Pinball board
+        return
     # Figure 4b: the best greedy solution through options, among the eight agents that hold
     # the most options (ties: the best last return).
     import torch

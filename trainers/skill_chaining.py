@@ -38,7 +38,9 @@ class SkillChainingRunAgent(SkillChainingAgent):
         from skillchain_torch.options import OptionBank
 
         # Class-balanced initiation-set fits: see SkillChainingAgent.build.
+        sizes = {} if cfg.env is None else dict(obs_dim=cfg.obs_dim, num_actions=cfg.num_actions)
         bank = OptionBank.build(cfg.runs, cfg.slots, seed=cfg.seed, device=device, balanced=True,
+                                **sizes,
                                 alpha=cfg.option_alpha,
                                 initial_bias=cfg.initiation_bias,
                                 keep_negatives=cfg.keep_negatives,

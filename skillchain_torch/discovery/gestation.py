@@ -161,7 +161,13 @@ def observation_box(dim: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
     return (_OBS_LOW, _OBS_HIGH) if dim == 4 else ((0.0,) * dim, (1.0,) * dim)
 
 
-def value_projection(top: FourierBasis, option: FourierBasis, points: int = 7,
+def grid_points(dim: int) -> int:
+    """Grid points per dim of the least-squares fits: 7 up to Pinball's 4 dims, 3 beyond
+    (``7 ** 6`` states would not fit in memory beside a 6-d basis)."""
+    return 7 if dim <= 4 else 3
+
+
+def value_projection(top: FourierBasis, option: FourierBasis, points: int | None = None,
                      low: tuple[float, ...] | None = None,
                      high: tuple[float, ...] | None = None) -> Tensor:  # fmt: skip
     """``[F_option, F_top]``: least-squares map from top-level weights to option weights.
@@ -179,6 +185,7 @@ def value_projection(top: FourierBasis, option: FourierBasis, points: int = 7,
         >>> round(float((M @ w)[0]), 9), round(float((M @ w)[1:].abs().max()), 9)
         (3.0, 0.0)
     """
+    points = grid_points(top.dim) if points is None else points
     low = observation_box(top.dim)[0] if low is None else low
     high = observation_box(top.dim)[1] if high is None else high
     if top.dim != option.dim or len(low) != top.dim or len(high) != top.dim or points < 2:
@@ -191,8 +198,12 @@ def value_projection(top: FourierBasis, option: FourierBasis, points: int = 7,
     # pinv (an SVD) and rowwise_dot give the same bits on every call; lstsq and matmul did not
     # (their rounding varies with the call and the operands' addresses). One option feature
     # at a time: each row's sum is the same, and the product stays in cache (6x faster).
-    rows = [rowwise_dot(chunk[:, None, :], phi_top[None]) for chunk in pinv.split(1)]
-    return torch.cat(rows)
+    # Each row goes straight into the result: a list of small results between the large
+    # products kept the allocator from reusing their memory (23 GB at 6 dims, 4,096 rows).
+    out = torch.empty(pinv.shape[0], phi_top.shape[0], dtype=dtype, device=pinv.device)
+    for i, chunk in enumerate(pinv.split(1)):
+        out[i] = rowwise_dot(chunk[:, None, :], phi_top[None])[0]
+    return out
 
 
 _PROJECTIONS: dict[tuple, Tensor] = {}
@@ -255,10 +266,10 @@ class StateValueFit:
 
     BLOCK = 128  # grid states (or output features) per product
 
-    def __init__(self, basis: FourierBasis, points: int = 7,
+    def __init__(self, basis: FourierBasis, points: int | None = None,
                  low: tuple[float, ...] | None = None,
                  high: tuple[float, ...] | None = None):  # fmt: skip
-        box = observation_box(basis.dim)
+        box, points = observation_box(basis.dim), points or grid_points(basis.dim)
         low, high = box[0] if low is None else low, box[1] if high is None else high
         dtype = basis.coefficients.dtype
         axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
@@ -279,6 +290,6 @@ class StateValueFit:
                           for pinv in self.pinv.split(self.BLOCK)])
 
 
-def state_value_fit(basis: FourierBasis, points: int = 7) -> StateValueFit:
+def state_value_fit(basis: FourierBasis, points: int | None = None) -> StateValueFit:
     """A :class:`StateValueFit` over ``basis`` (``points ** dim`` grid states)."""
     return StateValueFit(basis, points)
