@@ -193,7 +193,7 @@ def value_projection(top: FourierBasis, option: FourierBasis, points: int | None
                          f"and points >= 2, got dims {top.dim}, {option.dim}, points {points}")
     dtype = top.coefficients.dtype
     axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
-    grid = torch.cartesian_prod(*axes).to(top.coefficients.device)
+    grid = torch.cartesian_prod(*axes).reshape(-1, top.dim).to(top.coefficients.device)
     pinv, phi_top = torch.linalg.pinv(option(grid)), top(grid).T.contiguous()  # [Fo, N], [Ft, N]
     # pinv (an SVD) and rowwise_dot give the same bits on every call; lstsq and matmul did not
     # (their rounding varies with the call and the operands' addresses). One option feature
@@ -273,7 +273,7 @@ class StateValueFit:
         low, high = box[0] if low is None else low, box[1] if high is None else high
         dtype = basis.coefficients.dtype
         axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
-        grid = torch.cartesian_prod(*axes).to(basis.coefficients.device)
+        grid = torch.cartesian_prod(*axes).reshape(-1, basis.dim).to(basis.coefficients.device)
         self.phi = basis(grid)  # [N, F]
         self.pinv = torch.linalg.pinv(self.phi)  # [F, N]
 

@@ -432,7 +432,8 @@ class SkillChaining:
             if self.policy_start == "top-level":
                 if self._projection is None:  # once per run: a fixed grid, no random numbers
                     self._projection = cached_projection(self.top_basis, bank.q_head.basis)
-                initialise_option_policies(bank.q_head, q_head, join, self._projection)
+                initialise_option_policies(bank.q_head, q_head, join, self._projection,
+                                           bank.num_actions)  # fmt: skip
             for p, k in join.nonzero().tolist():
                 self._emit("joined", p, k, target=self.target_name(p, k),
                            value=float(value[p, k]))  # fmt: skip
