@@ -47,7 +47,7 @@ def _single_agent(agent, p: int, epsilon: float = 0.0, seed: int = 0) -> Hierarc
                                events=agent.events, max_option_steps=agent.max_option_steps,
                                overlap=True)
     with torch.no_grad():
-        single.q_head.weight.copy_(agent.q_head.weight[p : p + 1])
+        single.q_head.weight.copy_(agent.q_head.weight[p : p + 1])  # (the built-in head)
     for name in ("alpha", "lr"):  # frozen: no intra-option learning on the way
         if hasattr(single.bank.q_head, name):
             setattr(single.bank.q_head, name, 0.0)

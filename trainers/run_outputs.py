@@ -151,7 +151,14 @@ def write_discovery(trainer, discovery, out: Path) -> None:
     trainer.agent.bank.save(out / "options.pt")
     np.save(out / "n_options.npy", discovery.n_options)
     (out / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent), indent=1) + "\n")
-    if trainer.config.env is not None:  # Figure 4b is drawn on the Pinball board
+    if trainer.config.env is not None:  # Figure 4b off Pinball: observation dims 0 and 1
+        from .env_trajectory import best_env_trajectory, save_env_trajectory
+
+        held = trainer.agent.bank.live().sum(-1).cpu().numpy()
+        order = sorted(range(len(held)), key=lambda p: -held[p])[:4]
+        run = best_env_trajectory(trainer.agent, trainer.config.env, agents=order,
+                                  obs_bounds=trainer.config.obs_bounds)  # fmt: skip
+        save_env_trajectory(run, out / "option_trajectory.png")
         return
     # Figure 4b: the best greedy solution through options, among the eight agents that hold
     # the most options (ties: the best last return).

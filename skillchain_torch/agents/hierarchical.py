@@ -25,20 +25,10 @@ library pieces are), so agent ``p`` of a population is bit-identical to the same
 The state is held for all P agents; rows that finished training (``compact``) simply stop being
 updated.
 
-Two paths compute a step (``native``). The torch path composes the library pieces named above
-and gives their bits. The compiled path (the default on the CPU when built) runs the same
-transition through :func:`~skillchain_torch.agents.native_hierarchical.step`, one C pass per
-agent, after the memberships, target events, features and uniforms of ``s'`` (which stay in
-torch, where subclasses and users change them): the same decisions from the same uniforms, with
-sums in an order of its own, so weights agree with the torch path to rounding. Each path keeps
-the population contract on its own; a checkpoint resumes only on the path that saved it.
-
-Episode protocol (as :class:`skillchain_torch.trainers.flat.FlatSarsaAgent`; rows = active
-agents in ascending id order): ``begin(obs)``, ``observe(obs, reward)``,
-``observe_ends(obs, reward, terminated, truncated, restart_rows, start_obs)``,
-``compact(keep)``, ``actions``, ``index``, ``flush()``, ``state_dict()``,
-``load_state_dict()``. Also ``decisions`` and ``options`` (the top-level decision in force and
-the executing slot of each active row) for collectors.
+Two paths compute a step (``native``): the torch path below, and a compiled one
+(:mod:`.native_hierarchical`, the default where every piece it replaces is the built-in one)
+that gives the same decisions with sums in an order of its own. The top level's rules are in
+:mod:`.top_level`, the trainer's protocol in :mod:`.episode_protocol`.
 
 Example:
     >>> from skillchain_torch.options import OptionBank
@@ -56,24 +46,22 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch
-from tensordict import TensorDict
 from torch import Tensor, nn
 
 from skillchain_torch.agents import native_hierarchical as _native
-from skillchain_torch.discovery.events import evaluate_base_events, target_indicator
-from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion
+from skillchain_torch.agents.episode_protocol import EpisodeProtocol
+from skillchain_torch.agents.option_execution import OptionExecution
+from skillchain_torch.agents.top_level import TopLevel, shared_fourier_columns
+from skillchain_torch.discovery.overlap import overlap_exclusion
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
-from skillchain_torch.native import check_same_kernels
 from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate, SMDPSarsaLoss, discount
 from skillchain_torch.options import (
-    FourierOptionQHead,
     GoalEvent,
     InitiationClassifier,
     OptionBank,
     TerminationPredicate,
 )
-from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
 
 __all__ = ["HierarchicalAgent", "shared_fourier_columns", "NUM_PRIMITIVES", "MAX_OPTION_STEPS",
@@ -93,34 +81,7 @@ def as_bool(x: Tensor) -> Tensor:
     return x if x.dtype == torch.bool else x.to(torch.bool)
 
 
-def shared_fourier_columns(basis: FourierBasis, q_head) -> Tensor | None:
-    """Where the option heads' Fourier features sit among ``basis``'s, or ``None``.
-
-    A :class:`~skillchain_torch.options.FourierOptionQHead` of order ``o <= basis.order`` over
-    the same observation has coefficient vectors ``c in {0..o}^4``, a subset of ``basis``'s,
-    and :class:`FourierBasis` computes each ``cos(pi c . s)`` the same way whatever the order
-    (``c . s`` summed over the dims in order from the same products ``s_j * c_j``, then an
-    elementwise cosine), so ``q_head.encode(s)`` equals ``basis(s)[:, columns]`` bit for bit.
-
-    Example:
-        >>> from skillchain_torch.options import FourierOptionQHead
-        >>> columns = shared_fourier_columns(FourierBasis(4, 4), FourierOptionQHead(1, 1, order=3))
-        >>> columns.shape, columns[:3].tolist()
-        (torch.Size([256]), [0, 1, 2])
-    """
-    inner = getattr(q_head, "basis", None)
-    if type(q_head) is not FourierOptionQHead:  # a subclass may encode its own way
-        return None
-    if (not isinstance(inner, FourierBasis) or inner.dim != basis.dim
-            or inner.order > basis.order or inner.coefficients.dtype != basis.coefficients.dtype
-            or inner.coefficients.device != basis.coefficients.device):  # fmt: skip
-        return None
-    radix = basis.order + 1
-    places = radix ** torch.arange(basis.dim - 1, -1, -1, device=inner.coefficients.device)
-    return (inner.coefficients.to(torch.int64) * places).sum(-1)
-
-
-class HierarchicalAgent(nn.Module):
+class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
     """Population-batched SMDP Sarsa agent over primitive actions and the options of a bank.
 
     Args:
@@ -138,29 +99,17 @@ class HierarchicalAgent(nn.Module):
         overlap: apply skill chaining's no-overlap rule to memberships (an option stays out
             of its parent's and older siblings' sets), for options discovered under it; the
             bank's tree must not change afterwards (discovery itself uses ``SkillChaining``).
-        failure_bootstrap: what the SMDP target of an option execution that *timed out*
-            (ran ``max_option_steps`` without its target) bootstraps on: ``"decision"``
-            (Sarsa, the paper: ``Q(s', d')``) or ``"primitives"`` (``max_a Q(s', a)`` over
-            the five primitives). Under ``gamma = 1`` an option whose initial ``Q(s, o)`` is
-            optimistic is usually re-chosen at ``s'``, so with ``"decision"`` each timeout
-            lowers its value only by about its own cost (~100-300) and an agent can re-run
-            a failing option dozens of times in one episode; ``"primitives"`` charges the
-            failure against what the agent can do without options.
-        intra_option_primitives: the top level's primitive values also learn from the steps
-            inside options. SMDP Sarsa updates ``Q(s, a)`` of a primitive only when the agent
-            chose ``a`` itself, so once options carry most steps the primitives' values go
-            stale where the options run. With this on, each step ``(s, a, r, s')`` taken by
-            an executing option also moves the top-level ``Q(s, a)`` toward
-            ``r + gamma max_d Q(s', d)`` over the decisions available at ``s'`` (no bootstrap
-            when the episode terminated): intra-option value learning with a primitive as a
-            one-step option (Sutton, Precup & Singh 1999, section 7), off-policy. Off (the
-            paper's SMDP Sarsa) by default.
-        interruption: an executing option stops at ``s'`` where it is no longer the greedy
-            decision, ``Q(s', o) < max_d Q(s', d)`` over the decisions available there, and
-            the top level decides again (Sutton, Precup & Singh 1999, section 5: interrupting
-            never does worse than running the option to its end, under the values). The
-            interrupted execution is neither a success nor a failure of the option. Off (the
-            paper: options run until their termination predicate fires or they time out).
+        failure_bootstrap: what the SMDP target of a *timed-out* execution bootstraps on:
+            ``"decision"`` (Sarsa, the paper: ``Q(s', d')``) or ``"primitives"``
+            (``max_a Q(s', a)``: under ``gamma = 1`` an optimistic option re-chosen at ``s'``
+            loses only its own cost per timeout; this charges the failure against what the
+            agent can do without options).
+        intra_option_primitives: each step ``(s, a, r, s')`` inside an option also moves the
+            top-level ``Q(s, a)`` toward ``r + gamma max_d Q(s', d)`` (intra-option value
+            learning, Sutton, Precup & Singh 1999, section 7). Off (the paper's SMDP Sarsa).
+        interruption: an executing option stops at ``s'`` where ``Q(s', o) < max_d Q(s', d)``
+            (Sutton, Precup & Singh 1999, section 5); neither a success nor a failure. Off
+            (the paper: options run until their target fires or they time out).
         q_head: the top-level value head (a :class:`~skillchain_torch.interfaces.ValueHead`
             over ``5 + K`` decisions, on ``features``); default the paper's
             :class:`~skillchain_torch.modules.LinearQHead`, stepped in closed form by
@@ -302,94 +251,6 @@ class HierarchicalAgent(nn.Module):
             super().__setattr__(name, value)
 
     # ------------------------------------------------------------------ pieces
-    def top_level_available(self, obs: Tensor, contains: Tensor | None = None) -> Tensor:
-        """``[P, 5 + K]``: the primitives (always) and the available options at ``obs``."""
-        options = self.bank.available(obs, contains)
-        primitives = torch.ones(self.population, self.num_primitives, dtype=torch.bool,
-                                device=options.device)
-        return torch.cat([primitives, options], dim=-1)
-
-    def membership(self, obs: Tensor) -> Tensor:
-        """``[P, K]``: which initiation sets hold ``obs [P, 4]`` (one classifier evaluation per
-        visited state; skill chaining narrows it by its overlap rule)."""
-        contains = self.bank.classifier.contains(obs)
-        self._raw_contains = contains  # the classifiers' own sets: the targets of chained options
-        if self._exclusion is None:
-            return contains
-        return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
-
-    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
-        """``[P, K]``: each live option's termination predicate (target event) at ``s'``.
-
-        A chained option's target is its parent's own initiation set (the classifier's, as in
-        discovery), not the parent's set narrowed by the no-overlap rule."""
-        raw = contains if self._exclusion is None else self._raw_contains
-        bank = self.bank
-        # OptionBank.target_reached's answer from the events' values (compiled where built):
-        # this runs every step, and target_reached costs ~140 us of small torch ops.
-        if bank.slots and int(bank.target_event.max()) >= len(self.events):
-            used = int(bank.target_event.max())
-            raise ValueError(f"target event {used} used by a slot, but only {len(self.events)} "
-                             f"given")  # fmt: skip
-        return target_indicator(bank, evaluate_base_events(self.events, next_obs, terminated),
-                                raw)  # fmt: skip
-
-    def _encode(self, obs: Tensor, index: Tensor | None = None) -> tuple[Tensor, Tensor]:
-        """``(phi(s), option code of s)``: the top-level features and the option heads' code
-        (of the rows ``index`` of ``obs [P, 4]`` only, when given: ``[len(index), .]``).
-
-        When the option heads use a Fourier basis of the same observation and no higher order
-        (the paper: order 3 under order 4), their features are columns of the top level's,
-        computed with the same arithmetic (see :func:`shared_fourier_columns`), so they are
-        picked rather than computed again."""
-        phi = self.features(obs if index is None else obs[index])
-        if self._code_columns is not None:
-            return phi, phi[:, self._code_columns]
-        code = self.bank.q_head.encode(obs)  # a head's code may need every row (its checks)
-        return phi, code if index is None else code[index]
-
-    def _choose(self, obs: Tensor, phi: Tensor, contains: Tensor, uniforms: Tensor,
-                rows: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
-        """Top-level epsilon-greedy decision at ``obs``; ``(phi, decision)``.
-
-        Only the agents in ``rows [P]`` (default all) need a decision: an executing option that
-        goes on needs none, and the 5 + K values are the top level's largest cost. Other rows'
-        decisions are meaningless. ``phi`` and ``Q(obs, .)`` stay in ``last_phi`` and
-        ``last_q`` for subclasses (``last_q`` valid on ``rows`` for the available decisions,
-        0 for the others). ``phi``: ``features(obs)``, from :meth:`_encode`."""
-        available = self.top_level_available(obs, contains)
-        rows = torch.ones_like(self.active) if rows is None else rows
-        if self.native:
-            q, decision = _native.choose(self.q_head.weight, phi, available, rows,
-                                         self.num_primitives, uniforms, self.epsilon)  # fmt: skip
-            self.last_phi, self.last_q, self.last_available = phi, q, available
-            return phi, decision
-        # Value only what can be chosen: the primitives, and the few options whose initiation
-        # set holds the state (each value is the same row sum as a full forward).
-        q = self.q_head.forward_mask(phi, available & rows[:, None], dense=self.num_primitives)
-        self.last_phi, self.last_q, self.last_available = phi, q, available
-        return phi, epsilon_greedy(q, available, self.epsilon, uniforms,
-                                   check=False)  # primitives are always available
-
-    def _act(self, rows: Tensor, uniforms: Tensor) -> None:
-        """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's
-        epsilon-greedy action by its Q-head at the current state."""
-        if self.native:
-            self.action = _native.act(self.bank.q_head.weight, self.option_code, rows,
-                                      self.decision, self.option, uniforms, self.option_epsilon,
-                                      self.action.clone())  # fmt: skip
-            return
-        action = self.decision.clamp(max=self.num_primitives - 1)
-        executing = rows & (self.option >= 0)
-        index = executing.nonzero()[:, 0]
-        if index.numel() > 0:  # only the executing rows' option values (a row's own sums)
-            q_opt = self.bank.q_head.slot_values_rows(self.option_code, self.option, index)
-            all_actions = torch.ones_like(q_opt, dtype=torch.bool)
-            by_option = epsilon_greedy(q_opt, all_actions, self.option_epsilon, uniforms[index],
-                                       check=False)  # fmt: skip
-            action = action.index_put((index,), by_option)
-        self.action = torch.where(rows, action, self.action)
-
     def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
         """Rows ``rows [P]`` start an episode at ``obs [P, 4]`` (other rows of ``obs`` are
         ignored): fresh decision and action, 4 uniforms drawn.
@@ -522,154 +383,6 @@ class HierarchicalAgent(nn.Module):
         self.option = torch.where(ended, torch.full_like(self.option, -1), self.option)
         self._act(continuing, u[:, 2:])
         return info
-
-    def learn(self, phi: Tensor, decision: Tensor, ret: Tensor, duration: Tensor,
-              next_value: Tensor, terminated: Tensor, active: Tensor) -> Tensor:  # fmt: skip
-        """One SMDP Sarsa step of the top-level head toward ``ret + gamma^k next_value``
-        for the ``active`` agents; their TD errors ``[P]``. The built-in linear head steps in
-        closed form (:class:`SarsaUpdate`); any other by its loss and optimizer."""
-        if self.closed_form:
-            return self.update(self.q_head, phi, decision, ret, duration, phi, decision,
-                               terminated, active=active, next_value=next_value)
-        with torch.enable_grad():
-            return self._loss_step(phi, decision, ret, duration, next_value, terminated, active)
-
-    def _loss_step(self, phi, decision, ret, duration, next_value, terminated, active) -> Tensor:
-        td = TensorDict(phi=phi, decision=decision, decision_return=ret, duration=duration,
-                        next_value=next_value, terminated=terminated, active=active,
-                        batch_size=[self.population])  # fmt: skip
-        self.optimizer.zero_grad()
-        out = self.loss(td)
-        out["loss"].backward()
-        self.optimizer.step()
-        return out["td_error"]
-
-    def all_active(self) -> bool:
-        """Every agent is active: rows are agents (a check without a call into torch)."""
-        return self._index.numel() == self.population
-
-    def all_stepped(self, stepped: Tensor) -> bool:
-        """``stepped`` is the agent's own ``active`` mask with every agent active (what
-        :meth:`observe` passes): per-row masking by it changes nothing, so it can be skipped."""
-        return stepped is self.active and self.all_active()
-
-    # ------------------------------------------------------------------ protocol
-    def _full(self, rows_value: Tensor, fill: Tensor) -> Tensor:
-        if self.all_active():  # rows are agents
-            return rows_value if rows_value.dtype == fill.dtype else rows_value.to(fill.dtype)
-        out = fill.clone()
-        out[self._index] = rows_value if rows_value.dtype == out.dtype else rows_value.to(out.dtype)
-        return out
-
-    @torch.no_grad()
-    def begin(self, obs: Tensor) -> Tensor:
-        """First decisions of every active agent at its start observation ``[n, 4]``."""
-        self._start_decisions(self._full(obs, self.obs), self.active.clone())
-        return self.actions
-
-    @torch.no_grad()
-    def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
-        """Learn from a step in which no episode ended; the next actions ``[n]``."""
-        none = torch.zeros_like(self.active)
-        self.transition(self._full(obs, self.obs), self._full(reward, self.decision_return),
-                        none, none, self.active)
-        return self.actions
-
-    @torch.no_grad()
-    def observe_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
-                     restart_rows: Tensor, start_obs: Tensor | None) -> Tensor:
-        """Like :meth:`observe` when some episodes ended (see ``FlatSarsaAgent``): terminal
-        updates do not bootstrap, truncated ones do; rows in ``restart_rows`` then decide at
-        ``start_obs``."""
-        none = torch.zeros_like(self.active)
-        terminated, truncated = self._full(terminated, none), self._full(truncated, none)
-        self.transition(self._full(obs, self.obs), self._full(reward, self.decision_return),
-                        terminated, truncated, self.active)
-        self.episodes_ended(self.active & (terminated | truncated))
-        if restart_rows.numel() > 0:
-            restart = torch.zeros_like(self.active)
-            restart[self._index[restart_rows]] = True
-            start = self.obs.clone()
-            start[self._index[restart_rows]] = start_obs.to(start.dtype)
-            self._start_decisions(start, restart)
-        return self.actions
-
-    def episodes_ended(self, rows: Tensor) -> None:
-        """Agents ``rows [P]`` just ended an episode (before any restart); nothing to do here,
-        skill chaining runs its per-episode rules."""
-
-    def compact(self, keep: Tensor) -> None:
-        """Keep the active rows where ``keep [n]``; the others stop for good."""
-        self._index = self._index[keep]
-        active = torch.zeros_like(self.active)
-        active[self._index] = True
-        self.active = active
-
-    @property
-    def index(self) -> Tensor:
-        """Ids of the active agents, ascending ``[n]``."""
-        return self._index
-
-    @property
-    def actions(self) -> Tensor:
-        """The primitive action of each active row ``[n]``."""
-        if self.all_active():  # (action is replaced, never written)
-            return self.action
-        return self.action[self._index]
-
-    @property
-    def decisions(self) -> Tensor:
-        """The top-level decision in force for each active row ``[n]`` (5 + k: option k)."""
-        return self.decision[self._index]
-
-    @property
-    def options(self) -> Tensor:
-        """The executing option slot of each active row ``[n]`` (-1: none)."""
-        return self.option[self._index]
-
-    def flush(self) -> None:
-        """Nothing to write back: the state is held for all agents."""
-
-    # ------------------------------------------------------------------ state
-    _EPISODE = ("obs", "contains", "decision", "option", "decision_return", "duration",
-                "active")
-
-    def state_dict(self, *args, **kwargs):
-        """Top-level weights, options, streams, and every agent's episode state.
-
-        Laid out like ``FlatSarsaAgent``'s (``q_head``, ``rng``, ``index``, ``action``,
-        ``phi``: the features of the state where the decision in force was taken), plus
-        ``bank`` and ``episode`` (the per-agent option state).
-        """
-        return {
-            "q_head": self.q_head.state_dict(),
-            "rng": self.rng.state_dict(),
-            "index": self._index.clone(),
-            "action": self.action.clone(),
-            "phi": self.decision_phi.clone(),
-            "bank": self.bank.state_dict(),
-            "episode": {name: getattr(self, name).clone() for name in self._EPISODE},
-            "native": self.native,
-            **({} if self.optimizer is None else {"optimizer": self.optimizer.state_dict()}),
-        }
-
-    def load_state_dict(self, state, strict: bool = True, assign: bool = False):
-        device = self.obs.device
-        check_same_kernels(state, self.native)
-        self.q_head.load_state_dict(state["q_head"])
-        if self.optimizer is not None and "optimizer" in state:
-            self.optimizer.load_state_dict(state["optimizer"])
-        self.bank.load_state_dict(state["bank"])
-        self.rng.load_state_dict(state["rng"])
-        self.rng.to(device)
-        self._index = state["index"].to(device)
-        self.action = state["action"].to(device).clone()
-        self.decision_phi = state["phi"].to(device).clone()
-        for name in self._EPISODE:
-            setattr(self, name, state["episode"][name].to(device).clone())
-        phi, self.option_code = self._encode(self.obs)  # pure functions of s
-        if self.intra_option_primitives:
-            self.state_phi = phi
 
     def extra_repr(self) -> str:
         return (f"population={self.population}, slots={self.slots}, "

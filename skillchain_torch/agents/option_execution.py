@@ -1,0 +1,75 @@
+"""The options inside the hierarchical agent: which initiation sets hold a state, which
+targets fired, and the executing option's action (paper sections 2 and 4).
+
+A mixin of :class:`~skillchain_torch.agents.HierarchicalAgent` (it reads ``bank``, ``events``,
+the no-overlap ``_exclusion`` and the per-step state); skill chaining overrides
+:meth:`membership` and :meth:`targets` with its own rules.
+
+Example:
+    >>> from skillchain_torch.agents import HierarchicalAgent
+    >>> from skillchain_torch.options import OptionBank
+    >>> agent = HierarchicalAgent(OptionBank.build(population=1, slots=2, order=1), order=1)
+    >>> agent.membership(torch.tensor([[0.2, 0.9, 0.5, 0.5]], dtype=torch.float64)).tolist()
+    [[True, True]]
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from skillchain_torch.agents import native_hierarchical as _native
+from skillchain_torch.discovery.events import evaluate_base_events, target_indicator
+from skillchain_torch.discovery.overlap import exclude_overlap
+from skillchain_torch.policies import epsilon_greedy
+
+__all__ = ["OptionExecution"]
+
+
+class OptionExecution:
+    """Memberships, targets and the executing option's action."""
+
+    def membership(self, obs: Tensor) -> Tensor:
+        """``[P, K]``: which initiation sets hold ``obs [P, 4]`` (one classifier evaluation per
+        visited state; skill chaining narrows it by its overlap rule)."""
+        contains = self.bank.classifier.contains(obs)
+        self._raw_contains = contains  # the classifiers' own sets: the targets of chained options
+        if self._exclusion is None:
+            return contains
+        return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
+
+    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
+        """``[P, K]``: each live option's termination predicate (target event) at ``s'``.
+
+        A chained option's target is its parent's own initiation set (the classifier's, as in
+        discovery), not the parent's set narrowed by the no-overlap rule."""
+        raw = contains if self._exclusion is None else self._raw_contains
+        bank = self.bank
+        # OptionBank.target_reached's answer from the events' values (compiled where built):
+        # this runs every step, and target_reached costs ~140 us of small torch ops.
+        if bank.slots and int(bank.target_event.max()) >= len(self.events):
+            used = int(bank.target_event.max())
+            raise ValueError(f"target event {used} used by a slot, but only {len(self.events)} "
+                             f"given")  # fmt: skip
+        return target_indicator(bank, evaluate_base_events(self.events, next_obs, terminated),
+                                raw)  # fmt: skip
+
+    def _act(self, rows: Tensor, uniforms: Tensor) -> None:
+        """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's
+        epsilon-greedy action by its Q-head at the current state."""
+        if self.native:
+            self.action = _native.act(self.bank.q_head.weight, self.option_code, rows,
+                                      self.decision, self.option, uniforms, self.option_epsilon,
+                                      self.action.clone())  # fmt: skip
+            return
+        action = self.decision.clamp(max=self.num_primitives - 1)
+        executing = rows & (self.option >= 0)
+        index = executing.nonzero()[:, 0]
+        if index.numel() > 0:  # only the executing rows' option values (a row's own sums)
+            q_opt = self.bank.q_head.slot_values_rows(self.option_code, self.option, index)
+            all_actions = torch.ones_like(q_opt, dtype=torch.bool)
+            by_option = epsilon_greedy(q_opt, all_actions, self.option_epsilon, uniforms[index],
+                                       check=False)  # fmt: skip
+            action = action.index_put((index,), by_option)
+        self.action = torch.where(rows, action, self.action)
+
