@@ -15,47 +15,23 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from skillchain_torch.presets import DEFAULT, PAPER, PRESET_NAMES
+
 from .agents import AGENTS
 
 __all__ = ["build_parser", "CONFIG_OPTIONS"]
 
 # Options that define the run; with --resume the saved config is used instead.
 CONFIG_OPTIONS = (
-    "agent",
-    "map",
-    "env",
-    "obs_bounds",
-    "runs",
-    "episodes",
-    "seed",
-    "alpha",
-    "epsilon",
-    "gamma",
-    "order",
-    "scale_step_size",
-    "max_episode_steps",
-    "checkpoint_every",
-    "options",
-    "options_agent",
-    "slots",
-    "initiation_bias",
-    "initiation_centered",
-    "gestation_positives",
-    "initiation_start",
-    "initiation_constrain",
-    "one_class_fits",
-    "failure_bootstrap",
-    "keep_negatives",
-    "intra_option_primitives",
-    "option_interruption",
-    "policy_start",
-    "value_start",
-    "value_bonus",
-    "option_alpha",
-    "completion_reward",
-    "gestation",
+    "agent", "preset", "map", "env", "obs_bounds", "runs", "episodes", "seed", "alpha",
+    "epsilon", "gamma", "order",
+    "scale_step_size", "max_episode_steps", "checkpoint_every", "options", "options_agent",
+    "slots", "initiation_bias", "initiation_centered", "gestation_positives",
+    "initiation_start", "initiation_constrain", "one_class_fits", "failure_bootstrap",
+    "keep_negatives", "intra_option_primitives", "option_interruption", "policy_start",
+    "value_start", "value_bonus", "option_alpha", "completion_reward", "gestation",
     "convergence_threshold",
-)
+)  # fmt: skip
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -71,6 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--agent", choices=sorted(AGENTS), default=None, help="agent type (default: flat)"
     )
+    train.add_argument("--preset", choices=PRESET_NAMES, default=None,
+                       help="the values every flag below not given takes: the library's "
+                       "(default) or the paper's section 5.1 (paper); explicit flags win")
     train.add_argument(
         "--map", default=None, help="Pinball map name (default: pinball_simple_single)"
     )
@@ -156,21 +135,22 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N",
         help="reading: each time a gestating option's target fires, the last N states of the "
-        "trajectory become positive examples (0: none; 250: the paper's 'within 250 steps')",
+        "trajectory become positive examples, 0: none" + _presets("gestation_positives"),
     )
     train.add_argument(
         "--initiation-start",
         choices=("everything", "biased", "fitted"),
         default=None,
         help="reading: the initiation set when gestation ends: true everywhere, true through "
-        "--initiation-bias, or fitted on the gestation positives",
+        "--initiation-bias, or fitted on the gestation positives"
+        + _presets("initiation_start"),
     )
     train.add_argument(
         "--initiation-constrain",
         choices=("learned", "start"),
         default=None,
         help="reading: the 0.1 distance constraint once the set is learned, or from the end "
-        "of gestation",
+        "of gestation" + _presets("initiation_constrain"),
     )
     train.add_argument(
         "--wait-for-both-classes",
@@ -207,22 +187,23 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("decision", "primitives"),
         default=None,
         help="what a timed-out option execution's SMDP target bootstraps on: the next "
-        "decision (Sarsa, the paper) or the best primitive at s'",
+        "decision (Sarsa) or the best primitive at s'" + _presets("failure_bootstrap"),
     )
     train.add_argument(
         "--policy-start",
         choices=("zero", "top-level"),
         default=None,
         help="how a new option's policy starts when it joins: zero weights updated off-policy "
-        "in gestation, or the agent's own primitive values projected onto the option's basis",
+        "in gestation, or the agent's own primitive values projected onto the option's basis"
+        + _presets("policy_start"),
     )
     train.add_argument(
         "--value-start",
         choices=("max-sample", "agent"),
         default=None,
         help="how Q(s, o) starts when an option joins: the best value sampled when its target "
-        "fired in gestation, everywhere (the paper), or the agent's own max_a Q(s, a) fitted in "
-        "its basis plus --value-bonus",
+        "fired in gestation, everywhere, or the agent's own max_a Q(s, a) fitted in its basis "
+        "plus --value-bonus" + _presets("value_start"),
     )
     train.add_argument(
         "--value-bonus",
@@ -234,14 +215,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--option-alpha",
         type=float,
         default=None,
-        help="the options' Q-learning step size after they join (default 0: an option keeps "
-        "the policy it joins with; the paper: 0.0005)",
+        help="the options' Q-learning step size after they join, 0: an option keeps the policy "
+        "it joins with" + _presets("option_alpha"),
     )
     train.add_argument(
         "--gestation",
         type=int,
         default=None,
-        help="episodes a new option gestates before it can be chosen (default 2; the paper: 10)",
+        help="episodes a new option gestates before it can be chosen" + _presets("gestation"),
     )
     train.add_argument(
         "--convergence-threshold",
@@ -366,6 +347,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.commands = {"train": train, "summarize": summary, "reproduce": reproduce,
                        "verify": verify, "sweep": sweep}
     return parser
+
+
+def _presets(field: str) -> str:
+    """`` (default X; --preset paper: Y)`` for a flag's help, from the presets."""
+    default, paper = getattr(DEFAULT, field), getattr(PAPER, field)
+    return f" (default {default}; --preset paper: {paper})" if default != paper else ""
 
 
 def _positive(text: str) -> int:

@@ -1,15 +1,22 @@
 """``TrainConfig``: everything that defines a training run, validated in one place.
 
-The learning hyperparameters default to the paper's section 5.1: Sarsa with gamma = 1 and
-epsilon = 0.01 over a Fourier basis of order 4 with alpha = 0.001 on the first Pinball instance
-(simple maps) and of order 5 with alpha = 0.0005 on the second (maps whose name contains
-``"hard"``). ``None`` for ``order`` or ``alpha`` means "the paper's value for this map";
-:meth:`TrainConfig.resolved` fills them in.
+The learning values come from a named preset (:mod:`skillchain_torch.presets`; ``preset``,
+``"default"`` or ``"paper"``): every field the preset sets and the config leaves ``None`` takes
+the preset's value when the config is made, and a value given explicitly wins. Both presets
+take the top level from the paper's section 5.1: Sarsa with gamma = 1 and epsilon = 0.01 over a
+Fourier basis of order 4 with alpha = 0.001 on the first Pinball instance (simple maps) and of
+order 5 with alpha = 0.0005 on the second (maps whose name contains ``"hard"``). ``None`` for
+``order`` or ``alpha`` means "the paper's value for this map"; :meth:`TrainConfig.resolved`
+fills them in.
 
 Example:
     >>> cfg = TrainConfig(map="pinball_hard_single", runs=4, episodes=10).resolved()
     >>> cfg.order, cfg.alpha, cfg.gamma, cfg.epsilon
     (5, 0.0005, 1.0, 0.01)
+    >>> TrainConfig().gestation, TrainConfig(preset="paper").gestation
+    (2, 10)
+    >>> TrainConfig(preset="paper", gestation=4).gestation  # explicit values win
+    4
     >>> try:
     ...     TrainConfig(runs=0).validate()
     ... except ValueError as err:  # a ConfigError, naming the fields at fault
@@ -23,29 +30,34 @@ import dataclasses
 import json
 import math
 import numbers
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from skillchain_torch.discovery.readings import DEFAULT_READING as _DEFAULT
 from skillchain_torch.discovery.readings import InitiationReading
-from skillchain_torch.resources import available_memory, device_problem
+from skillchain_torch.presets import PRESET_FIELDS, instance_defaults, preset_named
+from skillchain_torch.resources import available_memory
 from skillchain_torch.resources import format_bytes as _size
 
+from .config_checks import ConfigError, check_device, memory_estimate, short, type_problem
+
 __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "RESUME_FIELDS",
-           "LEGACY_FIELDS", "UNREAD_FIELDS", "INT64_MAX"]
+           "LEGACY_FIELDS", "UNREAD_FIELDS", "LABEL_FIELDS", "PRESET_CONFIG_FIELDS", "INT64_MAX"]
 
 # Fields added after runs were published, with the behaviour every run before them had: a
 # saved config without one of them ran with this value (whatever today's default is).
-LEGACY_FIELDS = {"failure_bootstrap": "decision", "keep_negatives": False, "policy_start": "zero",
-                 "value_start": "max-sample", "value_bonus": 0.0, "option_alpha": 0.0005,
+LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_negatives": False,
+                 "policy_start": "zero", "value_start": "max-sample", "value_bonus": 0.0,
+                 "option_alpha": 0.0005,
                  "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15,
                  "intra_option_primitives": False, "option_interruption": False}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
 RESUME_FIELDS = ("checkpoint_every", "device")
+# Where the values came from: a label only (the values themselves are fields), so two configs
+# with the same values are the same run whichever preset they started from.
+LABEL_FIELDS = ("preset",)
 
 # Fields an agent kind never reads: a saved run of that kind does not differ from a config that
 # changes them (so a flat run stays valid when a skill-chaining default changes).
@@ -70,7 +82,7 @@ def env_order(dim: int) -> int:
 
 def paper_defaults(map_name: str) -> tuple[int, float]:
     """``(order, alpha)`` of the paper for a map: (5, 0.0005) on hard maps, else (4, 0.001)."""
-    return (5, 0.0005) if "hard" in map_name else (4, 0.001)
+    return instance_defaults(map_name)
 
 
 # Integer fields are stored in int64 tensors and arrays; agent p's random streams are keyed by
@@ -80,108 +92,72 @@ INT64_MAX = 2**63 - 1
 _BASE_BYTES = 256 * 2**20
 
 
-class ConfigError(ValueError):
-    """A ``ValueError`` from :meth:`TrainConfig.validate`; ``fields`` names the config fields
-    at fault (so a front end can name its own flags)."""
-
-    def __init__(self, message: str, fields: tuple[str, ...] = ()):
-        super().__init__(message)
-        self.fields = tuple(fields)
-
-
-def _short(value: Any, limit: int = 60) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _type_problem(kind: str, value: Any) -> str | None:
-    """``None`` if ``value`` fits the annotation ``kind`` (``"int"``, ``"float | None"``, ...),
-    else what it must be."""
-    kinds = [k.strip() for k in kind.split("|")]
-    optional = "None" in kinds
-    base = next(k for k in kinds if k != "None")
-    if value is None and optional:
-        return None
-    if base == "int":
-        ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
-        what = "an integer"
-    elif base == "float":
-        ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
-        what = "a number"
-    elif base == "bool":
-        ok = isinstance(value, bool)
-        what = "true or false"
-    else:
-        ok = isinstance(value, str) or (base == "str" and isinstance(value, os.PathLike)
-                                        and optional)
-        what = "a string"
-    return None if ok else what + (" or null" if optional else "")
-
-
-def _check_device(device: str) -> None:
-    """``ConfigError`` unless ``device`` names a torch device this machine has."""
-    problem = device_problem(device)
-    if problem is not None:
-        raise ConfigError(problem, ("device",))
-
-
 @dataclass(frozen=True)
 class TrainConfig:
     """A population training run.
 
+    Fields marked (preset) default to ``None``, which takes the value of ``preset`` when the
+    config is made (:mod:`skillchain_torch.presets` gives both presets' values and why they
+    differ); ``dataclasses.replace(cfg, preset=...)`` keeps the values already filled in.
+
     Args:
         agent: registry name of the agent (``"flat"``, ``"given-options"``,
             ``"skill-chaining"``; see ``skillchain_torch.trainers.AGENTS``).
+        preset: ``"default"`` (the library's) or ``"paper"`` (section 5.1's values).
         map: a shipped Pinball map name (``MAP_NAMES``).
         runs: P, the number of independent agents (each with its own environment).
         episodes: E, the episodes each agent runs.
         seed: agent ``p`` (and its environment) uses seed ``seed + p``.
         alpha: Sarsa step size (``None``: paper value for the map).
-        epsilon: exploration probability of epsilon-greedy, in [0, 1].
-        gamma: discount, in [0, 1].
+        epsilon: (preset) exploration probability of epsilon-greedy, in [0, 1].
+        gamma: (preset) discount, in [0, 1].
         order: Fourier basis order over the 4-d observation (``None``: paper value).
-        scale_step_size: per-feature step sizes ``alpha / ||c_i||`` (Konidaris et al. 2011).
+        scale_step_size: (preset) per-feature step sizes ``alpha / ||c_i||`` (Konidaris et al.
+            2011).
         max_episode_steps: truncate episodes after this many steps (``None``: never). A
             truncated episode bootstraps from its last state (it is not a termination).
         options: OptionBank file of given options (``--agent given-options``).
         options_agent: which saved agent's options every given-options agent starts with;
             ``None``: agent p takes saved agent ``p mod N`` (the paper's Figure 4 set-up,
             each agent given the options one skill-chaining run discovered).
-        slots: K, option slots per agent of ``--agent skill-chaining`` (when all are used the
-            agent creates no more options).
-        initiation_bias, initiation_centered: the initiation classifiers' ``initial_bias``
-            and ``centered`` (see :class:`~skillchain_torch.options.InitiationClassifier`);
-            the defaults, 0 and False, are the reading the first results used.
-        gestation_positives, initiation_start, initiation_constrain, one_class_fits: the
-            initiation-set reading of skill chaining (see
-            :class:`~skillchain_torch.discovery.InitiationReading`); the defaults are
-            :data:`~skillchain_torch.discovery.DEFAULT_READING` (``pos20-fitted-cstart``; see
-            ``results/screening/README.md``).
-        failure_bootstrap: what a timed-out option execution's SMDP target bootstraps on
-            (``"decision"``: Sarsa's ``Q(s', d')``, the paper; ``"primitives"``: the best
-            primitive at ``s'``; see :class:`~skillchain_torch.agents.HierarchicalAgent`).
-        intra_option_primitives: the top level's primitive values also learn, by one-step
-            Q-learning, from the steps taken inside options (the paper: only from the agent's
-            own primitive decisions; see :class:`~skillchain_torch.agents.HierarchicalAgent`).
-        option_interruption: an executing option stops where it is no longer the top level's
-            greedy decision (Sutton, Precup & Singh 1999; the paper's options run to their end;
-            see :class:`~skillchain_torch.agents.HierarchicalAgent`).
-        keep_negatives: the initiation classifiers' stores never drop a failure to make room
-            for a success's positives (see :class:`~skillchain_torch.options.
+        slots: (preset) K, option slots per agent of ``--agent skill-chaining`` (when all are
+            used the agent creates no more options).
+        initiation_bias, initiation_centered: (preset) the initiation classifiers'
+            ``initial_bias`` and ``centered`` (see
+            :class:`~skillchain_torch.options.InitiationClassifier`).
+        gestation_positives, initiation_start, initiation_constrain, one_class_fits: (preset)
+            the initiation-set reading of skill chaining (see
+            :class:`~skillchain_torch.discovery.InitiationReading`; default preset
+            ``pos20-fitted-cstart``, ``results/screening/README.md``).
+        failure_bootstrap: (preset) what a timed-out option execution's SMDP target
+            bootstraps on (``"decision"``: Sarsa's ``Q(s', d')``, the paper; ``"primitives"``:
+            the best primitive at ``s'``; see :class:`~skillchain_torch.agents.
+            HierarchicalAgent`).
+        intra_option_primitives: (preset) the top level's primitive values also learn, by
+            one-step Q-learning, from the steps taken inside options (the paper: only from the
+            agent's own primitive decisions; see :class:`~skillchain_torch.agents.
+            HierarchicalAgent`).
+        option_interruption: (preset) an executing option stops where it is no longer the top
+            level's greedy decision (Sutton, Precup & Singh 1999; the paper's options run to
+            their end; see :class:`~skillchain_torch.agents.HierarchicalAgent`).
+        keep_negatives: (preset) the initiation classifiers' stores never drop a failure to
+            make room for a success's positives (see :class:`~skillchain_torch.options.
             InitiationClassifier`).
-        policy_start: how a joining option's policy starts (``"zero"``: gestation's updates of
-            zero weights; ``"top-level"``: the agent's own primitive values projected onto the
-            option's basis; see :class:`~skillchain_torch.discovery.SkillChaining`).
-        option_alpha: the options' Q-learning step size (paper: ``alpha_o = 0.0005``); given
-            options keep the step size of the run that discovered them.
-        completion_reward: ``C``, added to an option's reward when its target fires (the paper
-            does not give it; 10,000 is the task's goal reward).
-        gestation: episodes a new option gestates before it joins the repertoire (paper: 10;
-            default 2: with a policy copied from the agent, gestation only delays the chain,
-            and 2 beat flat on episodes 26-50 where 10 did not; ``results/chain-growth/``).
-        convergence_threshold: an initiation set is learned (and becomes a target event) when
-            its classifier's weights moved on average less than this per episode, twice in a
-            row (paper: 0.15).
+        policy_start: (preset) how a joining option's policy starts (``"zero"``: gestation's
+            updates of zero weights; ``"top-level"``: the agent's own primitive values
+            projected onto the option's basis; see :class:`~skillchain_torch.discovery.
+            SkillChaining`).
+        option_alpha: (preset) the options' Q-learning step size (paper: ``alpha_o =
+            0.0005``); given options keep the step size of the run that discovered them.
+        completion_reward: (preset) ``C``, added to an option's reward when its target fires
+            (the paper does not give it; 10,000 is the task's goal reward).
+        value_start, value_bonus: (preset) how ``Q(s, o)`` starts when an option joins (see
+            :class:`~skillchain_torch.discovery.SkillChaining`).
+        gestation: (preset) episodes a new option gestates before it joins the repertoire
+            (paper: 10; default 2, ``results/chain-growth/``).
+        convergence_threshold: (preset) an initiation set is learned (and becomes a target
+            event) when its classifier's weights moved on average less than this per episode,
+            twice in a row (paper: 0.15).
         env: ``None`` for Pinball (``map``), else ``"gymnasium:ID"`` or
             ``"gymnasium:MODULE:ID"``: a Gymnasium env through TorchRL's ``GymEnv`` (see
             :mod:`skillchain_torch.envs.external`).
@@ -195,42 +171,54 @@ class TrainConfig:
     """
 
     agent: str = "flat"
+    preset: str = "default"
     map: str = "pinball_simple_single"
     runs: int = 1
     episodes: int = 100
     seed: int = 0
     alpha: float | None = None
-    epsilon: float = 0.01
-    gamma: float = 1.0
+    epsilon: float | None = None
+    gamma: float | None = None
     order: int | None = None
-    scale_step_size: bool = False
+    scale_step_size: bool | None = None
     max_episode_steps: int | None = None
     checkpoint_every: int = 25
     device: str = "cpu"
     options: str | None = None
     options_agent: int | None = 0
-    slots: int = 12
-    initiation_bias: float = 0.0
-    initiation_centered: bool = False
-    gestation_positives: int = _DEFAULT.gestation_positives
-    initiation_start: str = _DEFAULT.start
-    initiation_constrain: str = _DEFAULT.constrain
-    one_class_fits: bool = _DEFAULT.one_class_fits
-    failure_bootstrap: str = "primitives"
-    keep_negatives: bool = True
-    intra_option_primitives: bool = False
-    option_interruption: bool = False
-    policy_start: str = "top-level"
-    option_alpha: float = 0.0
-    completion_reward: float = 10_000.0
-    value_start: str = "agent"
-    value_bonus: float = 0.0
-    gestation: int = 2
-    convergence_threshold: float = 0.15
+    slots: int | None = None
+    initiation_bias: float | None = None
+    initiation_centered: bool | None = None
+    gestation_positives: int | None = None
+    initiation_start: str | None = None
+    initiation_constrain: str | None = None
+    one_class_fits: bool | None = None
+    failure_bootstrap: str | None = None
+    keep_negatives: bool | None = None
+    intra_option_primitives: bool | None = None
+    option_interruption: bool | None = None
+    policy_start: str | None = None
+    option_alpha: float | None = None
+    completion_reward: float | None = None
+    value_start: str | None = None
+    value_bonus: float | None = None
+    gestation: int | None = None
+    convergence_threshold: float | None = None
+
     env: str | None = None
     obs_bounds: str | None = None
     obs_dim: int | None = None
     num_actions: int | None = None
+
+    def __post_init__(self):
+        # Fill what the config leaves open from its preset, so every reader sees values.
+        try:
+            preset = preset_named(self.preset)
+        except ValueError as err:
+            raise ConfigError(str(err), ("preset",)) from None
+        for name in PRESET_CONFIG_FIELDS:
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, getattr(preset, name))
 
     @property
     def env_name(self) -> str:
@@ -269,11 +257,14 @@ class TrainConfig:
         from skillchain_torch.envs.pinball import MAP_NAMES
         from skillchain_torch.trainers.agents import AGENTS
 
+        preset = preset_named(self.preset)
         for field in dataclasses.fields(self):
-            value = getattr(self, field.name)
-            what = _type_problem(str(field.type), value)
+            value, kind = getattr(self, field.name), str(field.type)
+            if field.name in PRESET_CONFIG_FIELDS and getattr(preset, field.name) is not None:
+                kind = kind.replace(" | None", "")  # None was the preset's value, filled in
+            what = type_problem(kind, value)
             if what is not None:
-                raise ConfigError(f"{field.name} must be {what}, got {_short(value)}",
+                raise ConfigError(f"{field.name} must be {what}, got {short(value)}",
                                   (field.name,))
         if self.agent not in AGENTS:
             raise ConfigError(f"agent must be one of {', '.join(AGENTS)}, got {self.agent!r}",
@@ -352,40 +343,15 @@ class TrainConfig:
         if reading.start == "biased" and not self.initiation_bias > 0:
             raise ConfigError(f"initiation_start 'biased' needs initiation_bias > 0, got "
                               f"{self.initiation_bias}", ("initiation_start", "initiation_bias"))
-        _check_device(self.device)
+        check_device(self.device)
         if memory:
             self._check_memory()
         return self
 
     def memory_estimate(self) -> list[tuple[tuple[str, ...], str, int, bool]]:
-        """Lower bounds of the bytes of the run's largest arrays: ``(fields, what, bytes,
-        on_device)`` per array family (``on_device``: torch tensors on ``device``; else numpy
-        arrays in host memory). Sizes only: nothing is allocated.
-
-        The returns and lengths (and skill chaining's option counts) are ``[runs, episodes]``
-        int64/float64 arrays; the top-level Q weights and features take ``runs x (decisions
-        + 1) x (order + 1)^4`` float64 (5 primitives, plus ``slots`` options in skill
-        chaining); each skill-chaining option slot holds an order-3 Q-head (5 x 256 float64)
-        and a 500-example initiation-set store (500 x 4 float64 and labels).
-        """
-        runs, episodes = int(self.runs), int(self.episodes)
-        order = self.resolved().order
-        chaining = self.agent == "skill-chaining"
-        dim, actions = self.obs_dim or 4, self.num_actions or 5
-        decisions = actions + (int(self.slots) if chaining else 0)
-        features = (order + 1) ** dim
-        terms = [
-            (("runs", "episodes"), "returns and lengths [runs, episodes]",
-             runs * episodes * 8 * (3 if chaining else 2), False),
-            (("runs", "order", "slots") if chaining else ("runs", "order"),
-             "Q weights [runs, decisions, (order+1)^4 features]",
-             runs * (decisions + 1) * features * 8 + features * 4 * 8, True),
-        ]
-        if chaining:
-            per_slot = 5 * 256 * 8 + 500 * (4 * 8 + 1) + 15 * 8
-            terms.append((("runs", "slots"), "option banks [runs, slots, ...]",
-                          runs * int(self.slots) * per_slot, True))
-        return terms
+        """The run's largest arrays, ``(fields, what, bytes, on_device)`` each (sizes only;
+        see :func:`~.config_checks.memory_estimate`)."""
+        return memory_estimate(self)
 
     def _check_memory(self) -> None:
         import torch
@@ -438,8 +404,15 @@ class TrainConfig:
 
     def mismatches(self, other: TrainConfig) -> list[str]:
         """Fields whose values differ between two resolved configs, leaving out
-        ``RESUME_FIELDS`` and, when both are of one agent kind, the fields that kind never
-        reads (``UNREAD_FIELDS``)."""
+        ``RESUME_FIELDS``, the ``preset`` label (``LABEL_FIELDS``) and, when both are of one
+        agent kind, the fields that kind never reads (``UNREAD_FIELDS``)."""
         a, b = self.resolved().to_dict(), other.resolved().to_dict()
         unread = UNREAD_FIELDS.get(self.agent, ()) if self.agent == other.agent else ()
-        return [k for k in a if k not in RESUME_FIELDS and k not in unread and a[k] != b[k]]
+        skip = (*RESUME_FIELDS, *LABEL_FIELDS, *unread)
+        return [k for k in a if k not in skip and a[k] != b[k]]
+
+
+# TrainConfig's fields a preset fills when left None (order and alpha stay None in both
+# presets: resolved() fills them per map).
+PRESET_CONFIG_FIELDS = tuple(f.name for f in dataclasses.fields(TrainConfig)
+                             if f.name in PRESET_FIELDS)

@@ -1,8 +1,8 @@
 """A Gymnasium view of one Pinball environment, registered once per shipped map.
 
 Ids: ``skillchain_torch/Pinball-SimpleSingle-v0``, ``-HardSingle-v0``, ``-HardTwoStarts-v0``,
-``-Medium-v0``, ``-Box-v0`` and ``-Empty-v0`` (importing ``skillchain_torch.envs.pinball``
-registers them).
+``-Medium-v0``, ``-Box-v0`` and ``-Empty-v0`` (``import skillchain_torch`` registers them:
+see :mod:`skillchain_torch.envs.registration`).
 
 Observations are the Java descriptor (x, y, (xdot + 1) / 2, (ydot + 1) / 2) in
 ``Box(0, 1, (4,), float64)``. Why clipped: right after a reflection a velocity component can
@@ -12,7 +12,7 @@ to 0.21; the adapter clips it to honour the declared space. The unclipped raw st
 
 Example:
     >>> import gymnasium as gym
-    >>> import skillchain_torch.envs.pinball  # registers the ids
+    >>> import skillchain_torch  # registers the ids
     >>> env = gym.make("skillchain_torch/Pinball-SimpleSingle-v0")
     >>> obs, info = env.reset(seed=0)
     >>> obs.tolist()
@@ -26,19 +26,15 @@ import numpy as np
 import torch
 from gymnasium import spaces
 
+from ..registration import GYM_IDS, register_gym_envs
 from .grid import check_grid_size
-from .maps import MAP_NAMES, PinballMap, load_map
+from .maps import PinballMap, load_map
 from .physics import NUM_ACTIONS, pinball_step
 from .render import render_frame
 
 __all__ = ["GymPinballEnv", "GYM_IDS", "register_gym_envs"]
 
 
-def _camel(name: str) -> str:
-    return "".join(part.capitalize() for part in name.removeprefix("pinball_").split("_"))
-
-
-GYM_IDS = {f"skillchain_torch/Pinball-{_camel(name)}-v0": name for name in MAP_NAMES}
 
 
 class GymPinballEnv(gym.Env):
@@ -123,8 +119,3 @@ def _check_action(action) -> int:
     return int(action)
 
 
-def register_gym_envs() -> None:
-    """Register one Gymnasium id per shipped map (idempotent)."""
-    for env_id, name in GYM_IDS.items():
-        if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point=GymPinballEnv, kwargs={"map": name})

@@ -8,6 +8,10 @@ option covers creates an option; after 10 episodes of gestation it joins the dec
 its executions; once that converges it becomes a target event, and options are created to
 reach it, growing chains and trees backwards from the goal.
 
+:meth:`SkillChainingAgent.build` takes every value from a named preset
+(:mod:`skillchain_torch.presets`): ``"default"``, the agent ``skillchain train`` builds, or
+``"paper"``, the values above; keyword arguments override either.
+
 Compared with its parent class the agent:
 
 * narrows every membership query by the no-overlap rule (:meth:`membership`),
@@ -45,6 +49,7 @@ from skillchain_torch.discovery import (
 from skillchain_torch.discovery.readings import FIRST_READING
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
+from skillchain_torch.presets import PRESET_FIELDS, Preset, instance_defaults, preset_named
 
 from .hierarchical import MAX_OPTION_STEPS, HierarchicalAgent, as_bool
 
@@ -55,11 +60,12 @@ class SkillChainingAgent(HierarchicalAgent):
     """Population-batched skill chaining: P agents, K option slots each, discovered on-line.
 
     Args:
-        bank: an :class:`OptionBank` (usually empty; :meth:`build` makes the paper's).
+        bank: an :class:`OptionBank` (usually empty; :meth:`build` makes a preset's).
         events: the base target events, goal first (section 4.4).
         gestation, max_branching, convergence_threshold, convergence_episodes, overlap,
             wait_for_both_classes: the discovery rules (paper: 10, 3, 0.15, 2, on, off); see
-            :class:`~skillchain_torch.discovery.SkillChaining`.
+            :class:`~skillchain_torch.discovery.SkillChaining`. The constructor's defaults are
+            the paper's discovery rules; :meth:`build` takes every value from a preset.
         reading: the initiation-set reading (:class:`~skillchain_torch.discovery.
             InitiationReading`; default the first one, true everywhere until the first fit).
         policy_start: ``"zero"`` or ``"top-level"``: how a joining option's policy starts
@@ -107,20 +113,66 @@ class SkillChainingAgent(HierarchicalAgent):
         self._starts: Tensor | None = None  # agents whose option started this step, if any
 
     @classmethod
-    def build(cls, population: int, slots: int = 12, order: int = 4, option_order: int = 3,
-              option_alpha: float = 0.0005, seed: int | Tensor = 0, balanced: bool = True,
-              device: torch.device | str | None = None, **kwargs) -> SkillChainingAgent:
-        """The paper's agent with an empty bank of ``slots`` Fourier options per agent.
+    def build(cls, population: int, preset: str | Preset = "default", seed: int | Tensor = 0,
+              device: torch.device | str | None = None, map: str | None = None,
+              **kwargs) -> SkillChainingAgent:  # fmt: skip
+        """The agent of a named preset, with an empty bank of Fourier options per agent.
 
-        ``balanced``: fit the initiation sets with both classes weighted equally (see
-        :class:`~skillchain_torch.options.InitiationClassifier`). A success adds up to 250
-        positive examples and a failure one negative; fitted plainly, sets stayed wide where
-        options fail (in a 20-agent run the first goal options timed out in ~90% of their
-        executions and took ~75% of all steps by episode 15). ``False`` is the plain fit.
+        Args:
+            population: P, the number of independent agents.
+            preset: ``"default"`` (the library's, which ``skillchain train`` builds) or
+                ``"paper"`` (section 5.1's values); see :mod:`skillchain_torch.presets`.
+            seed: agent p's random streams are keyed by ``seed + p``.
+            map: the Pinball map whose paper ``order`` / ``alpha`` apply where the preset leaves
+                them to the instance (``None``: the first instance's, 4 and 0.001).
+            **kwargs: any :class:`~skillchain_torch.presets.Preset` field (``slots``,
+                ``gestation``, ``option_alpha``, ``balanced``, ...) overrides the preset's
+                value; the rest go to the constructor (``events``, ``native``, ``reading``,
+                ``interruption``, ...) and win over the preset.
+
+        Example:
+            >>> paper = SkillChainingAgent.build(2, preset="paper", order=1, gestation=5)
+            >>> paper.discovery.gestation, paper.discovery.policy_start
+            (5, 'zero')
+            >>> SkillChainingAgent.build(2, order=1).discovery.policy_start  # "default"
+            'top-level'
         """
-        bank = OptionBank.build(population, slots, order=option_order, alpha=option_alpha,
-                                seed=seed, device=device, balanced=balanced)  # fmt: skip
-        return cls(bank, order=order, seed=seed, device=device, **kwargs)
+        bank, arguments = cls.build_arguments(population, preset, seed=seed, device=device,
+                                              map=map, **kwargs)  # fmt: skip
+        return cls(bank, **arguments)
+
+    @staticmethod
+    def build_arguments(population: int, preset: str | Preset = "default",
+                        seed: int | Tensor = 0, device: torch.device | str | None = None,
+                        map: str | None = None, **kwargs) -> tuple[OptionBank, dict]:  # fmt: skip
+        """``(bank, constructor keyword arguments)`` of :meth:`build` (the trainer's
+        ``SkillChainingRunAgent`` builds through this too, so both build the same agent)."""
+        fields = {k: kwargs.pop(k) for k in list(kwargs) if k in PRESET_FIELDS}
+        # The env's sizes (its specs; None: Pinball's 4 and 5).
+        sizes = {k: v for k in ("obs_dim", "num_actions") if (v := kwargs.pop(k, None)) is not None}
+        p = preset_named(preset).replace(**fields)
+        order, alpha = instance_defaults(map)
+        bank = OptionBank.build(population, p.slots, order=p.option_order, alpha=p.option_alpha,
+                                seed=seed, device=device, degree=p.degree, lr=p.lr,
+                                sweeps=p.sweeps, capacity=p.capacity, distance=p.distance,
+                                balanced=p.balanced, keep_negatives=p.keep_negatives,
+                                initial_bias=p.initiation_bias,
+                                centered=p.initiation_centered, **sizes)  # fmt: skip
+        reading = InitiationReading(p.gestation_positives, p.initiation_start,
+                                    p.initiation_constrain, p.one_class_fits)  # fmt: skip
+        arguments = dict(
+            order=order if p.order is None else p.order,
+            alpha=alpha if p.alpha is None else p.alpha, gamma=p.gamma, epsilon=p.epsilon,
+            seed=seed, device=device, scale_step_size=p.scale_step_size,
+            failure_bootstrap=p.failure_bootstrap, completion_reward=p.completion_reward,
+            intra_option_primitives=p.intra_option_primitives,
+            interruption=p.option_interruption, option_epsilon=p.option_epsilon,
+            max_option_steps=p.max_option_steps, gestation=p.gestation,
+            max_branching=p.max_branching, convergence_threshold=p.convergence_threshold,
+            convergence_episodes=p.convergence_episodes, overlap=p.overlap, reading=reading,
+            policy_start=p.policy_start, value_start=p.value_start, value_bonus=p.value_bonus,
+        )  # fmt: skip
+        return bank, {**arguments, **kwargs}
 
     # ------------------------------------------------------------------ hooks
     def membership(self, obs: Tensor) -> Tensor:

@@ -32,10 +32,11 @@ GOAL_ONLY = (GoalEvent(),)
 
 
 def make_agent(slots=3, events=GOAL_ONLY, **kwargs) -> SkillChainingAgent:
-    """One agent, order-1 features, no exploration and a frozen top level (alpha 0)."""
+    """One agent of the paper's preset (the rules under test are the paper's), order-1
+    features, no exploration and a frozen top level (alpha 0)."""
     kwargs = {"order": 1, "option_order": 1, "alpha": 0.0, "epsilon": 0.0,
               "option_epsilon": 0.0, "events": events, **kwargs}
-    return SkillChainingAgent.build(population=1, slots=slots, **kwargs)
+    return SkillChainingAgent.build(population=1, preset="paper", slots=slots, **kwargs)
 
 
 def episode(agent, xs, terminated=True, first=False, next_start=0.1):

@@ -1,0 +1,208 @@
+"""Named presets: every value a skill-chaining run is built from, in one place.
+
+Two presets, read by :meth:`SkillChainingAgent.build(preset=...)
+<skillchain_torch.agents.SkillChainingAgent.build>`, by
+:class:`~skillchain_torch.trainers.TrainConfig` (its ``preset`` field fills every field left
+``None``) and so by ``skillchain train --preset``:
+
+* ``"paper"``: the values section 5.1 of Konidaris & Barto (2009) states, read onto this
+  library's parameters; where the paper is silent it keeps the library default and says so.
+* ``"default"``: the library's default, the one ``results/paper/`` ran; it departs from the
+  paper in the fields below, each for the reason given beside it (measured in
+  ``results/screening/`` and ``results/chain-growth/``; ``results/paper/DISCUSSION.md``).
+
+================================  ==============  ===============
+field                             ``default``     ``paper``
+================================  ==============  ===============
+``gestation``                     2               10
+``gestation_positives``           20              0
+``initiation_start``              ``fitted``      ``everything``
+``initiation_constrain``          ``start``       ``learned``
+``policy_start``                  ``top-level``   ``zero``
+``value_start``                   ``agent``       ``max-sample``
+``option_alpha``                  0.0             0.0005
+``failure_bootstrap``             ``primitives``  ``decision``
+================================  ==============  ===============
+
+Explicit values override a preset's (keyword arguments of ``build``, fields of ``TrainConfig``,
+flags of ``skillchain train``). This module imports nothing heavy, so the command line can read
+it before torch loads.
+
+Example:
+    >>> PAPER.gestation, DEFAULT.gestation
+    (10, 2)
+    >>> preset_named("paper").replace(gestation=5).gestation
+    5
+    >>> sorted(differences(DEFAULT, PAPER))[:3]
+    ['failure_bootstrap', 'gestation', 'gestation_positives']
+    >>> preset_named("papr")
+    Traceback (most recent call last):
+    ...
+    ValueError: unknown preset 'papr'; valid presets: default, paper
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["Preset", "PAPER", "DEFAULT", "PRESETS", "PRESET_NAMES", "PRESET_FIELDS",
+           "preset_named", "differences", "instance_defaults"]
+
+
+def instance_defaults(map_name: str | None) -> tuple[int, float]:
+    """The paper's top-level ``(order, alpha)`` for a Pinball map: (5, 0.0005) on the second
+    instance (maps whose name contains ``"hard"``), else (4, 0.001) (section 5.1)."""
+    return (5, 0.0005) if map_name is not None and "hard" in map_name else (4, 0.001)
+
+
+@dataclass(frozen=True)
+class Preset:
+    """The values a skill-chaining agent is built from (see the module docstring).
+
+    Fields named as :class:`~skillchain_torch.trainers.TrainConfig`'s (and so as the flags of
+    ``skillchain train``); the others (``option_order``, ``option_epsilon``,
+    ``max_option_steps``, ``max_branching``, ``convergence_episodes``, ``overlap``,
+    ``balanced``, ``capacity``, ``distance``, ``degree``, ``lr``, ``sweeps``) only through
+    :meth:`SkillChainingAgent.build`. ``order`` / ``alpha`` ``None``: the paper's value for
+    the map (:func:`instance_defaults`).
+    """
+
+    name: str
+    # top level: SMDP Sarsa over primitives and options
+    epsilon: float
+    gamma: float
+    order: int | None
+    alpha: float | None
+    scale_step_size: bool
+    failure_bootstrap: str
+    completion_reward: float
+    intra_option_primitives: bool
+    option_interruption: bool
+    # options: Q-learning over a Fourier basis
+    option_order: int
+    option_alpha: float
+    option_epsilon: float
+    max_option_steps: int
+    policy_start: str
+    value_start: str
+    value_bonus: float
+    # discovery
+    slots: int
+    gestation: int
+    max_branching: int
+    convergence_threshold: float
+    convergence_episodes: int
+    overlap: bool
+    # initiation sets: logistic regression, and the reading of section 5.1's open points
+    degree: int
+    lr: float
+    sweeps: int
+    distance: float
+    capacity: int
+    balanced: bool
+    keep_negatives: bool
+    initiation_bias: float
+    initiation_centered: bool
+    gestation_positives: int
+    initiation_start: str
+    initiation_constrain: str
+    one_class_fits: bool
+
+    def replace(self, **changes: Any) -> Preset:
+        """A copy with ``changes``; ``TypeError`` names a field presets do not have."""
+        unknown = sorted(set(changes) - {"name", *PRESET_FIELDS})
+        if unknown:
+            raise TypeError(f"presets have no field {', '.join(unknown)}; fields: "
+                            f"{', '.join(PRESET_FIELDS)}")  # fmt: skip
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The values, ``name`` left out."""
+        return {f: getattr(self, f) for f in PRESET_FIELDS}
+
+
+PRESET_FIELDS = tuple(f.name for f in dataclasses.fields(Preset) if f.name != "name")
+
+PAPER = Preset(
+    name="paper",
+    epsilon=0.01,  # 5.1: Sarsa (gamma = 1, epsilon = 0.01)
+    gamma=1.0,  # 5.1: gamma = 1
+    order=None,  # 5.1: Fourier order 4 (first instance), 5 (second)
+    alpha=None,  # 5.1: alpha 0.001 (first instance), 0.0005 (second)
+    scale_step_size=False,  # 5.1: one alpha for every basis function
+    failure_bootstrap="decision",  # 5.1: Sarsa's target bootstraps on the next decision
+    completion_reward=10_000.0,  # silent on the options' completion reward: library default
+    intra_option_primitives=False,  # 5.1: the top level learns by SMDP Sarsa alone
+    option_interruption=False,  # 3: an option runs until its termination condition holds
+    option_order=3,  # 5.1: options' 3rd-order Fourier basis
+    option_alpha=0.0005,  # 5.1: Q-learning, alpha_o = 0.0005
+    option_epsilon=0.01,  # 5.1: options' epsilon = 0.01
+    max_option_steps=250,  # 5.1: a success reaches the goal "within 250 steps"
+    policy_start="zero",  # 5.1: gestation's off-policy updates, from zero weights
+    value_start="max-sample",  # 5.1: Q(s, o) = the max of the values sampled in gestation
+    value_bonus=0.0,  # 5.1: nothing added to that maximum
+    slots=12,  # silent (it has no slot limit): library default
+    gestation=10,  # 5.1: a gestation period of 10 episodes
+    max_branching=3,  # 5.1: a maximum branching factor of 3
+    convergence_threshold=0.15,  # 5.1: weights changed on average less than 0.15 ...
+    convergence_episodes=2,  # 5.1: ... for two consecutive episodes
+    overlap=True,  # 4.3: no overlap with siblings or parents
+    degree=2,  # 5.1: 2nd order polynomial features
+    lr=0.1,  # 5.1: learning rate eta = 0.1
+    sweeps=100,  # 5.1: 100 sweeps per new data point
+    distance=0.1,  # 5.1: within a Euclidean distance of 0.1 of a positive example
+    capacity=500,  # silent on how many examples are kept: library default
+    balanced=True,  # silent on class weights: library default (trainers/README.md)
+    keep_negatives=True,  # silent on which examples a full store drops: library default
+    initiation_bias=0.0,  # 5.1: "initialized to be true everywhere" (untrained: all true)
+    initiation_centered=False,  # 5.1: polynomial features of the state as it is
+    gestation_positives=0,  # 5.1: examples come from executions only
+    initiation_start="everything",  # 5.1: "initialized to be true everywhere"
+    initiation_constrain="learned",  # 5.1: constrained "after this learning period"
+    one_class_fits=True,  # 5.1: refit "per new data point", whatever its class
+)
+
+DEFAULT = PAPER.replace(
+    name="default",
+    # A timed-out option bootstrapped on its own optimistic Q(s', o) again and again (one agent
+    # re-ran an option 38 times in an episode, 27 timeouts): bootstrap on the best primitive.
+    failure_bootstrap="primitives",
+    # Options that keep learning after joining hurt on episodes 26-50 (-436 +- 799 against
+    # +300 +- 773 over flat, 20 runs): an option keeps the policy it joins with.
+    option_alpha=0.0,
+    # From zero weights options timed out in streaks; start from the agent's own primitive
+    # values, as deep skill chaining copies the global agent.
+    policy_start="top-level",
+    # The paper's constant Q(s, o) with a good policy ran a 583,873-step episode.
+    value_start="agent",
+    # 10 episodes grew the chain too slowly to matter by episode 50 (2.4 options at episode 25
+    # against 9.7 under 2; results/chain-growth/).
+    gestation=2,
+    # Under "true everywhere" 78 of 100 agents ended with no usable option (results/paper-v1):
+    # fit the set on the last 20 states before each target hit in gestation, constrained to
+    # 0.1 of a positive from the start (pos20-fitted-cstart, results/screening/).
+    gestation_positives=20,
+    initiation_start="fitted",
+    initiation_constrain="start",
+)
+
+PRESETS: dict[str, Preset] = {"default": DEFAULT, "paper": PAPER}
+PRESET_NAMES = tuple(PRESETS)
+
+
+def preset_named(name: str | Preset) -> Preset:
+    """The preset called ``name`` (a :class:`Preset` passes through); ``ValueError`` in one
+    line naming the valid presets otherwise."""
+    if isinstance(name, Preset):
+        return name
+    if isinstance(name, str) and name in PRESETS:
+        return PRESETS[name]
+    raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESET_NAMES)}")
+
+
+def differences(a: Preset, b: Preset) -> dict[str, tuple[Any, Any]]:
+    """``{field: (a's value, b's value)}`` for every field the two presets set differently."""
+    return {f: (getattr(a, f), getattr(b, f)) for f in PRESET_FIELDS
+            if getattr(a, f) != getattr(b, f)}

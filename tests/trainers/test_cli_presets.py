@@ -1,0 +1,142 @@
+"""``skillchain train --preset`` and ``TrainConfig.preset``: the CLI, the config and
+``SkillChainingAgent.build`` read one set of presets and build the same agents."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from skillchain_torch.agents import SkillChainingAgent
+from skillchain_torch.presets import DEFAULT, PAPER, PRESET_FIELDS
+from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+from skillchain_torch.trainers.cli import _config_from_args, build_parser, main
+from skillchain_torch.trainers.config import PRESET_CONFIG_FIELDS, UNREAD_FIELDS
+from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+
+ROOT = Path(__file__).resolve().parents[2]
+BOX = ["--map", "pinball_box", "--max-episode-steps", "300", "--quiet"]
+
+
+def config_of(*argv: str) -> TrainConfig:
+    parser = build_parser()
+    return _config_from_args(parser, parser.parse_args(["train", "--out", "unused", *argv]))
+
+
+def same_agents(a: SkillChainingAgent, b: SkillChainingAgent) -> None:
+    """Equal state (every tensor bit for bit) and equal settings."""
+    sa, sb = a.state_dict(), b.state_dict()
+    flat_a, flat_b = _flatten(sa), _flatten(sb)
+    assert flat_a.keys() == flat_b.keys()
+    for key, value in flat_a.items():
+        other = flat_b[key]
+        if isinstance(value, torch.Tensor):
+            assert value.dtype == other.dtype and torch.equal(value, other), key
+        else:
+            assert value == other, key
+    assert a.extra_repr() == b.extra_repr()
+    assert a.bank.classifier.config == b.bank.classifier.config
+    assert a.bank.q_head.config == b.bank.q_head.config
+
+
+def _flatten(state, prefix=""):
+    if isinstance(state, dict):
+        out = {}
+        for k, v in state.items():
+            out.update(_flatten(v, f"{prefix}{k}."))
+        return out
+    return {prefix: state}
+
+
+def test_config_fields_a_preset_fills_are_preset_fields():
+    assert set(PRESET_CONFIG_FIELDS) <= set(PRESET_FIELDS)
+    assert TrainConfig().to_dict() == {**TrainConfig().to_dict(),
+                                       **{k: getattr(DEFAULT, k) for k in PRESET_CONFIG_FIELDS}}
+
+
+@pytest.mark.parametrize("preset", ["default", "paper"])
+def test_the_cli_and_build_configure_the_same_agent(preset):
+    cfg = config_of("--agent", "skill-chaining", "--preset", preset, "--runs", "2",
+                    "--seed", "11")
+    assert cfg.preset == preset
+    from_cli = SkillChainingRunAgent(cfg)
+    from_build = SkillChainingAgent.build(population=2, preset=preset, seed=11)
+    same_agents(from_cli, from_build)
+
+
+def test_an_explicit_flag_overrides_the_preset():
+    cfg = config_of("--agent", "skill-chaining", "--preset", "paper", "--gestation", "3",
+                    "--option-alpha", "0.25")
+    assert (cfg.gestation, cfg.option_alpha) == (3, 0.25)
+    assert (cfg.policy_start, cfg.value_start, cfg.gestation_positives) == (
+        "zero", "max-sample", 0)  # the rest is the paper's
+    agent = SkillChainingRunAgent(cfg)
+    assert (agent.discovery.gestation, agent.bank.q_head.config["alpha"]) == (3, 0.25)
+
+
+def test_an_unknown_preset_is_one_line_naming_the_valid_ones(capsys, tmp_path):
+    with pytest.raises(SystemExit) as info:
+        main(["train", "--preset", "papers", "--out", str(tmp_path / "run")])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--preset" in err and "'default'" in err and "'paper'" in err, err
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps({**TrainConfig().to_dict(), "preset": "papers"}))
+    with pytest.raises(ValueError, match=r"unknown preset 'papers'; valid presets: default, paper"):
+        TrainConfig.load_json(path)
+
+
+def test_preset_paper_lands_the_papers_values_in_config_json(tmp_path):
+    out = tmp_path / "run"
+    assert main(["train", "--agent", "skill-chaining", "--preset", "paper", "--runs", "1",
+                 "--episodes", "1", "--slots", "2", "--out", str(out), *BOX]) == 0
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["preset"] == "paper"
+    expected = {k: getattr(PAPER, k) for k in PRESET_CONFIG_FIELDS if k != "slots"}
+    expected.update(order=4, alpha=0.001)  # the paper's, for the first instance
+    assert {k: saved[k] for k in expected} == expected
+    assert saved["gestation"] == 10 and saved["policy_start"] == "zero"
+    assert TrainConfig.load_json(out / "config.json").preset == "paper"
+
+
+def test_build_default_and_the_cli_default_agent_give_the_same_returns(tmp_path):
+    """The agent ``skillchain train`` builds by default is ``build(preset="default")``: the
+    same returns on a short run in which options are created and join."""
+    out = tmp_path / "cli"
+    assert main(["train", "--agent", "skill-chaining", "--runs", "2", "--seed", "3",
+                 "--episodes", "5", "--out", str(out), *BOX]) == 0
+    config = TrainConfig.load_json(out / "config.json")
+    assert config.preset == "default"
+    trainer = PopulationTrainer(config)
+    trainer.agent = SkillChainingAgent.build(population=2, preset="default", seed=3)
+    trainer.train()
+    assert np.array_equal(trainer.returns, np.load(out / "returns.npy"))
+    assert np.array_equal(trainer.lengths, np.load(out / "lengths.npy"))
+    assert int(trainer.agent.bank.live().sum()) > 0  # discovery took part
+
+
+def test_committed_configs_without_a_preset_load_as_the_default():
+    """Every published run predates presets; they ran the default preset's values."""
+    paths = sorted((ROOT / "results" / "paper").glob("*/*/config.json"))
+    assert len(paths) == 6
+    for path in paths:
+        raw = json.loads(path.read_text())
+        assert "preset" not in raw
+        config = TrainConfig.load_json(path)
+        assert config.preset == "default"
+        assert not config.mismatches(config)
+        unread = set(UNREAD_FIELDS[config.agent])
+        differ = {k for k in PRESET_CONFIG_FIELDS if k not in unread | {"order", "alpha"}
+                  and getattr(config, k) != getattr(DEFAULT, k)}
+        assert not differ, (path, differ)
+
+
+def test_the_preset_label_alone_is_no_mismatch():
+    """``preset`` names where the values came from; the values decide whether runs differ."""
+    paper = TrainConfig(agent="skill-chaining", preset="paper")
+    relabelled = TrainConfig(**{**paper.to_dict(), "preset": "default"})
+    assert relabelled.gestation == 10 and not paper.mismatches(relabelled)
+    assert "gestation" in paper.mismatches(TrainConfig(agent="skill-chaining"))
