@@ -80,6 +80,14 @@ def env_order(dim: int) -> int:
     return max([1] + [o for o in range(1, 5) if (o + 1) ** dim <= 10_000])
 
 
+def env_alpha(order: int, dim: int) -> float:
+    """The default step size off Pinball: the paper's ``alpha * num_features`` on the first
+    instance (0.001 x 625) over the env's ``(order + 1) ** dim`` features, so that one update
+    moves a value about as far as on Pinball (a Fourier vector's squared norm is about half
+    its length): 0.025 on MountainCar at order 4, 0.00015 on Acrobot at order 3."""
+    return 0.001 * 625 / (order + 1) ** dim
+
+
 def paper_defaults(map_name: str) -> tuple[int, float]:
     """``(order, alpha)`` of the paper for a map: (5, 0.0005) on hard maps, else (4, 0.001)."""
     return instance_defaults(map_name)
@@ -233,10 +241,11 @@ class TrainConfig:
 
     def resolved(self) -> TrainConfig:
         """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``; off
-        Pinball, the highest order up to 4 with at most 10,000 features, and alpha 0.001)."""
+        Pinball, :func:`env_order` and :func:`env_alpha`)."""
         order, alpha = paper_defaults(self.map)
         if self.env is not None:
-            order = env_order(self.obs_dim or 4)
+            order = env_order(self.obs_dim or 4) if self.order is None else int(self.order)
+            alpha = env_alpha(order, self.obs_dim or 4)
         return dataclasses.replace(
             self,
             order=order if self.order is None else int(self.order),

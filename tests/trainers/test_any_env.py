@@ -34,6 +34,7 @@ def test_agents_run_on_mountain_car_with_sizes_from_the_specs(agent):
     trainer.train()
     assert (trainer.config.obs_dim, trainer.config.num_actions) == (2, 3)
     assert trainer.config.order == 4  # the highest order up to 4 with <= 10,000 features
+    assert trainer.config.alpha == 0.001 * 625 / 25  # Pinball's alpha x features, per feature
     assert (trainer.lengths == 60).all() and np.isfinite(trainer.returns).all()
     actions = torch.cat(seen)
     assert int(actions.min()) >= 0 and int(actions.max()) <= 2  # 3 actions, never Pinball's 4
