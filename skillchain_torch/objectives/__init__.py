@@ -1,13 +1,15 @@
 """Update rules ("objectives" in TorchRL terms): closed-form TD steps for the linear heads
 (:class:`SarsaUpdate`, :class:`IntraOptionQLearning`) and the same rules as TorchRL loss modules
-(:class:`SMDPSarsaLoss`) for heads trained by an optimizer."""
+(:class:`SMDPSarsaLoss`, :class:`IntraOptionQLoss`) for heads trained by an optimizer."""
 
+from skillchain_torch.objectives.intra_option_loss import IntraOptionQLoss
 from skillchain_torch.objectives.q_learning import IntraOptionQLearning, option_td_target
 from skillchain_torch.objectives.sarsa import SarsaUpdate, discount, smdp_td_error
 from skillchain_torch.objectives.smdp_sarsa_loss import SMDPSarsaLoss
 
 __all__ = [
     "IntraOptionQLearning",
+    "IntraOptionQLoss",
     "SMDPSarsaLoss",
     "SarsaUpdate",
     "discount",
