@@ -37,7 +37,8 @@ def test_intra_option_closed_form_equals_the_losss_sgd_step():
     by_loss = as_parameter(FourierOptionQHead(P, K, order=2, alpha=alpha))
     with torch.no_grad():
         by_loss.weight.copy_(closed.weight)
-    obs, next_obs = torch.rand(P, 4, generator=g, dtype=F64), torch.rand(P, 4, generator=g, dtype=F64)
+    obs = torch.rand(P, 4, generator=g, dtype=F64)
+    next_obs = torch.rand(P, 4, generator=g, dtype=F64)
     action, reward = torch.tensor([0, 3, 4]), torch.tensor([-1.0, -5.0, -1.0], dtype=F64)
     terminated = torch.tensor([False, False, True])
     inside = torch.rand(P, K, generator=g) < 0.6
