@@ -16,7 +16,8 @@ import importlib
 _EXPORTS = {
     "AGENTS": "agents",
     "make_agent": "agents",
-    "ActiveEnvStepper": "stepper",
+    "ActiveEnvStepper": "population",
+    "EnvStepper": "env_stepper",
     "EpisodeBatch": "population",
     "PopulationTrainer": "population",
     "STAGES": "population",

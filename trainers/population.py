@@ -46,11 +46,11 @@ import torch
 
 from skillchain_torch.envs.external import make_env, read_specs
 from skillchain_torch.envs.pinball import PinballEnv
+from skillchain_torch.envs.pinball.stepper import SCALAR_MAX, ActiveEnvStepper
 
 from .agents import make_agent
 from .config import TrainConfig
 from .env_stepper import EnvStepper
-from .stepper import SCALAR_MAX, ActiveEnvStepper
 
 __all__ = ["PopulationTrainer", "EpisodeBatch", "STAGES", "Diverged", "DIVERGED_OUTPUTS"]
 

@@ -15,9 +15,11 @@ Starts are drawn by ``env.reset_raw`` (the env's own per-environment stream). Th
 is the truth while training; :meth:`sync` writes it back into the env (its state and step
 counters) before checkpoints and at the end.
 
-Why the env's private simulator holder (``env._sim``: ``state``, ``step_count``, ``done``, ``rng``)
-is touched here and only here: the env has no masked ``step_raw`` and no ``state_dict`` for its
-raw state yet.
+This is the env's documented fast path, and it lives in the env's own package: it is the only
+code outside :class:`PinballEnv` that touches the env's simulator holder (``env._sim``:
+``state``, ``step_count``, ``done``, ``rng``), because the env has no masked ``step_raw`` and no
+``state_dict`` for its raw state yet. The trainer uses it for Pinball and
+:class:`~skillchain_torch.trainers.env_stepper.EnvStepper` (``EnvBase.step``) for any other env.
 """
 
 from __future__ import annotations
