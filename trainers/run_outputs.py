@@ -155,8 +155,8 @@ def write_discovery(trainer, discovery, out: Path) -> None:
         from .env_trajectory import best_env_trajectory, save_env_trajectory
 
         held = trainer.agent.bank.live().sum(-1).cpu().numpy()
-        order = sorted(range(len(held)), key=lambda p: -held[p])[:4]
-        run = best_env_trajectory(trainer.agent, trainer.config.env, agents=order,
+        order = sorted(range(len(held)), key=lambda p: -held[p])[:2]  # (torch path: slow)
+        run = best_env_trajectory(trainer.agent, trainer.config.env, agents=order, tries=1,
                                   obs_bounds=trainer.config.obs_bounds)  # fmt: skip
         save_env_trajectory(run, out / "option_trajectory.png")
         return

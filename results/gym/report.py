@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-AGENTS = ("flat", "skill-chaining", "given-options")
+AGENTS = ("flat", "skill-chaining", "skill-chaining-paper", "given-options")
 WINDOWS = ((1, 10), (11, 25), (26, 50), (51, 100))
 # Two-sided 95% t quantiles by degrees of freedom (1..30, then the normal's).
 _T95 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179,
@@ -56,21 +56,20 @@ def load(env: str) -> dict[str, dict[str, np.ndarray]]:
 
 
 def table(env: str, runs: dict) -> list[str]:
-    lines = [f"### {env}", "", "| episodes | " + " | ".join(runs) + " | skill chaining - flat | "
-             "given - flat |", "|---" * (len(runs) + 3) + "|"]
+    lines = [f"### {env}", "", "| episodes | " + " | ".join(runs) + " | "
+             + " | ".join(f"{a} - flat" for a in runs if a != "flat") + " |",
+             "|---" * (2 * len(runs)) + "|"]
     for first, last in WINDOWS:
         cells = []
         means = {a: r["returns"][:, first - 1:last].mean(1) for a, r in runs.items()}
         for agent in runs:
             m, h = mean_ci(means[agent])
             cells.append(f"{m:,.1f} ± {h:,.1f}")
-        for other in ("skill-chaining", "given-options"):
+        for other in ("skill-chaining", "skill-chaining-paper", "given-options"):
             if other in means and "flat" in means:
                 d, h = diff_ci(means[other], means["flat"])
                 star = " *" if abs(d) > h else ""
                 cells.append(f"{d:+,.1f} ± {h:,.1f}{star}")
-            else:
-                cells.append("")
         lines.append(f"| {first}-{last} | " + " | ".join(cells) + " |")
     for agent, r in runs.items():
         if "n_options" in r:
