@@ -81,9 +81,7 @@ class OptionMonitor:
             e.g. :class:`TensorBoardHook`'s; ``None``: count only (read :meth:`end_episodes`).
         probe_resolution: positions per side of the probe grid for ``initiation_size``.
         size_every: write ``initiation_size`` every this many population episodes (also at the
-            first and at the end); 0: never. Probing every live slot of every agent at every
-            episode took a quarter of a 10 x 100 run's time; at 5 it costs about 2% (only the
-            slots that changed are probed again, see :class:`SlotMemo`).
+            first and at the end); 0: never. (Every episode cost a quarter of a 10 x 100 run.)
         image_every: write initiation-set images every this many population episodes (also at
             the first and at the end); 0: never.
         image_agents: agents whose options are drawn.
@@ -134,8 +132,7 @@ class OptionMonitor:
         # are its sums and columns): the per-step cost is most of the monitor's.
         self._tally = torch.zeros(P, K + 1, **zeros)
         self._column = torch.arange(P, device=device) * (K + 1) + 1  # + option = flat index
-        # On the CPU the same counting through NumPy views of these tensors: a NumPy
-        # operation on ten numbers costs a fraction of a torch one (9 against 19 us a step).
+        # On the CPU through NumPy views: an operation on ten numbers costs far less there.
         self._numpy = device.type == "cpu"
         if self._numpy:
             self._tally_np = self._tally.view(-1).numpy()
@@ -174,13 +171,16 @@ class OptionMonitor:
         """``[P, K]`` steps of the current episode under each option."""
         return self._tally[:, 1:]
 
-    @torch.no_grad()
     def _count(self, info: dict, next_obs: Tensor, terminated: Tensor, stepped: Tensor) -> None:
-        option = info["option"]
-        stepped = stepped.to(torch.bool)
+        # No torch.no_grad() decorator: entering it cost more than the NumPy counting.
         if self._numpy:
-            self._count_numpy(info, option, next_obs, terminated, stepped)
+            self._count_numpy(info, next_obs, terminated, stepped)
             return
+        with torch.no_grad():
+            self._count_torch(info, next_obs, terminated, stepped.to(torch.bool))
+
+    def _count_torch(self, info, next_obs, terminated, stepped) -> None:
+        option = info["option"]
         self._tally.view(-1).index_add_(0, self._column + option, stepped.to(torch.int64))
         executed = info["decision_ended"] & (option >= 0) & stepped  # an execution ended
         if not bool(executed.any()):
@@ -193,10 +193,11 @@ class OptionMonitor:
         self.successes += ended & reached
         self.timeouts += ended & ~reached & (duration >= self.agent.max_option_steps)
 
-    def _count_numpy(self, info, option, next_obs, terminated, stepped) -> None:
-        """:meth:`_count` on the CPU, on NumPy views of the counters: the same counts. Rows
-        are agents, so each (row, slot) index below is distinct and ``+=`` adds once."""
-        option_np, stepped_np = option.numpy(), stepped.numpy()
+    def _count_numpy(self, info, next_obs, terminated, stepped) -> None:
+        """The same counts on NumPy views (a (row, slot) index is distinct: ``+=`` adds once)."""
+        if stepped.dtype != torch.bool:
+            stepped = stepped.to(torch.bool)
+        option_np, stepped_np = info["option"].numpy(), stepped.numpy()
         self._tally_np[self._column_np + option_np] += stepped_np
         executed = info["decision_ended"].numpy() & (option_np >= 0) & stepped_np
         if not executed.any():
@@ -216,8 +217,9 @@ class OptionMonitor:
         if reached is None:  # an agent that does not report its options' targets
             agent = self.agent
             terminated = terminated.to(torch.bool) & stepped
-            reached = agent.bank.target_reached(next_obs, terminated, agent.events,
-                                                contains=agent.contains)
+            with torch.no_grad():
+                reached = agent.bank.target_reached(next_obs, terminated, agent.events,
+                                                    contains=agent.contains)
         return reached
 
     _COUNTERS = ("steps", "option_steps", "executions", "execution_steps", "successes",
