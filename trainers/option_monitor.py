@@ -33,12 +33,8 @@ agent-episode (``agent_{p}/option_{k}/...``, step = episode). Counters of an epi
 are not saved in checkpoints: after a resume the first episode's counts are partial.
 
 :func:`initiation_density` and :func:`plot_initiation_set` (plain functions for notebooks) live
-in :mod:`.initiation_images` and are re-exported here.
-
-Example:
-    >>> monitor = OptionMonitor()                # count only: no logger
-    >>> monitor.size_every, monitor.image_every  # population episodes between probes
-    (5, 10)
+in :mod:`.initiation_images` and are re-exported here. Example:
+``OptionMonitor(logger, size_every=1)`` probes the sets at every episode, as before issue 29.
 """
 
 from __future__ import annotations
@@ -80,8 +76,8 @@ class OptionMonitor:
         logger: a TorchRL logger with ``log_scalar`` and ``experiment`` (a ``SummaryWriter``),
             e.g. :class:`TensorBoardHook`'s; ``None``: count only (read :meth:`end_episodes`).
         probe_resolution: positions per side of the probe grid for ``initiation_size``.
-        size_every: write ``initiation_size`` every this many population episodes (also at the
-            first and at the end); 0: never. (Every episode cost a quarter of a 10 x 100 run.)
+        size_every: as ``image_every``, for ``initiation_size`` (probing every episode cost
+            a quarter of a 10 x 100 run).
         image_every: write initiation-set images every this many population episodes (also at
             the first and at the end); 0: never.
         image_agents: agents whose options are drawn.
@@ -97,7 +93,7 @@ class OptionMonitor:
 
     def __init__(self, logger=None, probe_resolution: int = 12, image_every: int = 10,
                  image_agents=(0,), image_resolution: int = 50, per_agent: bool = False,
-                 pinball_map=None, size_every: int = 5):
+                 pinball_map=None, size_every: int = 10):
         self.logger = logger
         self.probe_resolution = int(probe_resolution)
         self.size_every = int(size_every)
@@ -127,9 +123,8 @@ class OptionMonitor:
         P, K = agent.bank.population, agent.bank.slots
         device = agent.bank.status.device
         zeros = dict(dtype=torch.int64, device=device)
-        # Steps of the current episode per agent and decision: column 0 primitive decisions,
-        # column k + 1 option k. One index_add_ a step counts them (steps and option_steps
-        # are its sums and columns): the per-step cost is most of the monitor's.
+        # Steps of the current episode under primitive decisions (column 0) and option k
+        # (k + 1): one indexed add a step, the per-step cost being most of the monitor's.
         self._tally = torch.zeros(P, K + 1, **zeros)
         self._column = torch.arange(P, device=device) * (K + 1) + 1  # + option = flat index
         # On the CPU through NumPy views: an operation on ten numbers costs far less there.
@@ -172,10 +167,8 @@ class OptionMonitor:
         return self._tally[:, 1:]
 
     def _count(self, info: dict, next_obs: Tensor, terminated: Tensor, stepped: Tensor) -> None:
-        # No torch.no_grad() decorator: entering it cost more than the NumPy counting.
-        if self._numpy:
-            self._count_numpy(info, next_obs, terminated, stepped)
-            return
+        if self._numpy:  # (no torch.no_grad() there: entering it cost more than the count)
+            return self._count_numpy(info, next_obs, terminated, stepped)
         with torch.no_grad():
             self._count_torch(info, next_obs, terminated, stepped.to(torch.bool))
 
@@ -372,14 +365,20 @@ class OptionMonitor:
     def post_train(self, trainer) -> None:
         if self.logger is None:
             return
-        start = time.perf_counter()
-        episode = int(trainer.episodes_done.min())
-        if self.size_every > 0 and episode > self._last_size:
-            self.log_sizes(episode)
-        if self.image_every > 0 and episode > self._last_image:
-            self.log_images(episode)
-        self.logger.experiment.flush()
-        self.seconds += time.perf_counter() - start
+        start, threads = time.perf_counter(), torch.get_num_threads()
+        # After train() torch is back at its default threads; these small ops took 10x
+        # longer there on a busy 2-core machine than at the trainer's one thread.
+        torch.set_num_threads(getattr(trainer, "num_threads", None) or threads)
+        try:
+            episode = int(trainer.episodes_done.min())
+            if self.size_every > 0 and episode > self._last_size:
+                self.log_sizes(episode)
+            if self.image_every > 0 and episode > self._last_image:
+                self.log_images(episode)
+            self.logger.experiment.flush()
+        finally:
+            torch.set_num_threads(threads)
+            self.seconds += time.perf_counter() - start
 
 
 def _stats(total: dict, agents: int) -> dict[str, np.ndarray]:

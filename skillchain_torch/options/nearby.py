@@ -56,12 +56,12 @@ def within_any(points: Tensor, examples: Tensor, distance: float) -> Tensor:
     out = torch.zeros(n, dtype=torch.bool, device=points.device)
     if n == 0 or m == 0:
         return out
-    if not (bool(torch.isfinite(points).all()) and bool(torch.isfinite(examples).all())
-            and distance > 0):  # fmt: skip
+    if not distance > 0:
         return _dense(points, examples, distance)
     cell = float(distance) * _WIDEN
+    # (amax propagates NaN: a non-finite coordinate fails the test too.)
     reach = max(float(points.abs().amax()), float(examples.abs().amax())) / cell
-    if reach > 2.0**40:  # cell indices must stay exact integers
+    if not reach <= 2.0**40:  # cell indices must stay exact integers
         return _dense(points, examples, distance)
     point_cell = torch.floor(points / cell).to(torch.int64)
     example_cell = torch.floor(examples / cell).to(torch.int64)

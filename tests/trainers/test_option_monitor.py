@@ -195,7 +195,7 @@ def test_event_file(option_run):
     tags = set(events.Tags()["scalars"])
     for key in ("step_share", "executions", "initiation_size"):
         assert f"options/slot_0/{key}" in tags
-        # Every population episode, but the probed sizes: the first, every size_every (5),
+        # Every population episode, but the probed sizes: the first, every size_every (10),
         # and the end.
         steps = [1, 3] if key == "initiation_size" else [1, 2, 3]
         assert [e.step for e in events.Scalars(f"options/slot_0/{key}")] == steps
