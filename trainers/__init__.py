@@ -37,6 +37,7 @@ _EXPORTS = {
     "DiscoveryLog": "discovery_log",
     "option_tree": "discovery_log",
     "greedy_trajectory": "option_trajectory",
+    "greedy_trajectories": "option_trajectory",
     "best_greedy_trajectory": "option_trajectory",
     "plot_option_trajectory": "option_trajectory",
     "SkillChainingRunAgent": "skill_chaining",

@@ -29,6 +29,7 @@ Example:
 
 from __future__ import annotations
 
+import time
 from collections import Counter
 
 import numpy as np
@@ -77,6 +78,7 @@ class DiscoveryLog:
         self.n_options: np.ndarray | None = None
         self.totals: Counter = Counter()
         self._map = None
+        self.seconds = 0.0  # wall time in the hooks (recorded in run_info.json)
 
     def register(self, trainer, name: str = "discovery") -> None:
         if getattr(trainer.agent, "discovery", None) is None:
@@ -90,6 +92,13 @@ class DiscoveryLog:
         trainer.register_module(name, self)
 
     def post_episodes(self, trainer, batch) -> None:
+        start = time.perf_counter()
+        try:
+            self._post_episodes(trainer, batch)
+        finally:
+            self.seconds += time.perf_counter() - start
+
+    def _post_episodes(self, trainer, batch) -> None:
         agent = trainer.agent
         live = agent.bank.live().sum(-1).cpu().numpy()
         self.n_options[batch.agents, batch.episodes] = live[batch.agents]
@@ -122,7 +131,7 @@ class DiscoveryLog:
         log("discovery/agents_slots_full", full, step=episode)
 
     def _image(self, agent, event) -> None:
-        from .option_monitor import initiation_density, initiation_image
+        from .initiation_images import initiation_density, initiation_image
 
         density = initiation_density(agent.bank, event.agent, event.slot, self.image_resolution)
         image = initiation_image(density, self._map)

@@ -27,7 +27,7 @@ import torch
 
 from skillchain_torch.envs.external import make_env, read_specs
 
-from .option_trajectory import OPTION_COLORS, _single_agent, solution_rank
+from .option_trajectory import OPTION_COLORS, _frozen_agents, solution_rank
 
 __all__ = ["env_trajectory", "best_env_trajectory", "plot_env_trajectory",
            "save_env_trajectory"]  # fmt: skip
@@ -39,7 +39,7 @@ def env_trajectory(agent, p: int, env_spec: str, max_steps: int = 1000, seed: in
     """Agent ``p`` for one episode of ``env_spec`` (seeded ``seed``), greedy unless
     ``epsilon``: observations ``[T + 1, D]`` (unit box), the option in control at each step
     ``[T]`` (-1: a primitive decision), the return and whether the episode terminated."""
-    single = _single_agent(agent, p, epsilon, seed)
+    single = _frozen_agents(agent, [p], epsilon, [seed])
     env = make_env(env_spec, seed=seed)
     sizes = read_specs(env, obs_bounds)
     td = env.reset()

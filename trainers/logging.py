@@ -22,6 +22,7 @@ Example:
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -107,6 +108,7 @@ class TensorBoardHook:
         self.options = options
         self.option_monitor = None
         self._last = None  # (elapsed, agent_steps) at the previous population point
+        self.seconds = 0.0  # wall time writing the scalars (recorded in run_info.json)
 
     @classmethod
     def for_run(cls, trainer, out_dir: str | Path, **kwargs) -> TensorBoardHook:
@@ -132,6 +134,13 @@ class TensorBoardHook:
         log_config(self.logger, trainer.config)
 
     def post_episodes(self, trainer, batch) -> None:
+        start = time.perf_counter()
+        try:
+            self._post_episodes(trainer, batch)
+        finally:
+            self.seconds += time.perf_counter() - start
+
+    def _post_episodes(self, trainer, batch) -> None:
         log = self.logger.log_scalar
         if self.per_agent:
             for p, e, r, n in zip(batch.agents, batch.episodes, batch.returns, batch.lengths):

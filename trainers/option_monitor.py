@@ -2,8 +2,7 @@
 their initiation sets look like, written to TensorBoard.
 
 :class:`OptionMonitor` counts, per agent and option slot, from the read-outs of
-:meth:`HierarchicalAgent.transition` (a few ``[P]`` / ``[P, K]`` tensor additions per step; the
-target predicates are re-evaluated only on steps where some option execution ended):
+:meth:`HierarchicalAgent.transition` (a few additions per step):
 
 * steps under each option slot (and under primitive decisions),
 * executions that ended, their summed durations (steps), and how they ended: by the option's
@@ -19,7 +18,8 @@ written at step ``e``, for every slot that is live in some agent:
 * ``options/slot_{k}/executions``: executions per agent-episode;
 * ``options/slot_{k}/mean_duration``: mean steps per execution (when there were executions);
 * ``options/slot_{k}/success_rate``, ``timeout_rate``: fractions of the executions;
-* ``options/slot_{k}/initiation_size``: the fraction of a fixed probe grid of observations
+* ``options/slot_{k}/initiation_size`` (every ``size_every`` population episodes, at the
+  first and at the end): the fraction of a fixed probe grid of observations
   (``probe_resolution ** 2`` positions times the 25 velocities of Figure 5) inside the slot's
   initiation set, averaged over the agents where the slot is live;
 * ``options/live_slots``: live slots per agent;
@@ -31,27 +31,32 @@ With ``per_agent=True`` each agent's share, duration and success rate are also w
 agent-episode (``agent_{p}/option_{k}/...``, step = episode). Counters of an episode in progress
 are not saved in checkpoints: after a resume the first episode's counts are partial.
 
-:func:`initiation_density` and :func:`plot_initiation_set` are plain functions for notebooks.
-
-Example:
-    >>> import torch
-    >>> from skillchain_torch.options import InitiationClassifier
-    >>> clf = InitiationClassifier(1, 1)
-    >>> with torch.no_grad():
-    ...     clf.weight[0, 0, 1] = -1.0; clf.bias[0, 0] = 0.5   # x < 0.5
-    ...     clf.trained[0, 0] = True
-    >>> d = initiation_density(clf, 0, 0, resolution=4)
-    >>> d.tolist()[0]                                          # one row: y fixed, x varies
-    [1.0, 1.0, 0.0, 0.0]
+:func:`initiation_density` and :func:`plot_initiation_set` (plain functions for notebooks) live
+in :mod:`.initiation_images` and are re-exported here. Example:
+``OptionMonitor(logger, size_every=1)`` probes the sets at every episode, as before issue 29.
 """
 
 from __future__ import annotations
+
+import time
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from skillchain_torch.options import InitiationClassifier, OptionBank
+from skillchain_torch.options import OptionBank
+
+# The plain functions lived here first; re-exported so that existing imports keep working.
+from .initiation_images import (
+    VELOCITIES,
+    SlotMemo,
+    board_masks,
+    contains_many,
+    initiation_density,
+    initiation_image,
+    plot_initiation_set,
+    probe_observations,
+)
 
 __all__ = [
     "VELOCITIES",
@@ -63,141 +68,6 @@ __all__ = [
     "plot_initiation_set",
 ]
 
-# Figure 5: xdot and ydot sampled over {-1, -1/2, 0, 1/2, 1} (raw velocities).
-VELOCITIES = (-1.0, -0.5, 0.0, 0.5, 1.0)
-
-
-def probe_observations(resolution: int = 50, velocities=VELOCITIES,
-                       dtype: torch.dtype = torch.float64, device=None, dim: int = 4) -> Tensor:
-    """Observations ``[R * R * V * V, 4]`` of a Figure-5 probe grid.
-
-    Positions are the centres of an ``R x R`` grid on the unit board, velocities every pair of
-    ``velocities`` (raw, mapped to the descriptor ``(v + 1) / 2``). The order is
-    ``(y, x, xdot, ydot)`` from slowest to fastest, so a result reshaped to
-    ``[R, R, V * V]`` is indexed ``[row = y, column = x, velocity pair]``.
-
-    Off Pinball (``dim != 4``) the grid spans observation dims 0 and 1 of the unit box and the
-    other dims sit at the centre, 0.5: ``[R * R, dim]``, a slice of the set.
-    """
-    if resolution < 1:
-        raise ValueError(f"resolution must be >= 1, got {resolution}")
-    centres = (torch.arange(resolution, dtype=dtype, device=device) + 0.5) / resolution
-    if dim != 4:
-        y, x = torch.meshgrid(centres, centres, indexing="ij")
-        rest = torch.full((resolution * resolution, max(dim - 2, 0)), 0.5, dtype=dtype,
-                          device=device)  # fmt: skip
-        return torch.cat([x.reshape(-1, 1), y.reshape(-1, 1), rest], dim=1)[:, :dim]
-    vel = (torch.as_tensor(velocities, dtype=dtype, device=device) + 1.0) / 2.0
-    y, x, vx, vy = torch.meshgrid(centres, centres, vel, vel, indexing="ij")
-    return torch.stack([x, y, vx, vy], dim=-1).reshape(-1, 4)
-
-
-def _classifier(source) -> InitiationClassifier:
-    if isinstance(source, OptionBank):
-        return source.classifier
-    if isinstance(source, InitiationClassifier):
-        return source
-    bank = getattr(source, "bank", None)  # an agent
-    if isinstance(bank, OptionBank):
-        return bank.classifier
-    raise TypeError(f"expected an InitiationClassifier, an OptionBank or an agent with a bank, "
-                    f"got {type(source).__name__}")
-
-
-@torch.no_grad()
-def contains_many(classifier: InitiationClassifier, agent: int, slot: int,
-                  obs: Tensor) -> Tensor:
-    """``BoolTensor [N]``: membership of ``obs [N, 4]`` in agent ``agent``'s slot ``slot``
-    (:meth:`InitiationClassifier.contains_points`)."""
-    return classifier.contains_points(agent, slot, obs)
-
-
-def initiation_density(classifier_or_bank, agent: int = 0, slot: int = 0,
-                       resolution: int = 50, velocities=VELOCITIES) -> np.ndarray:
-    """The paper's Figure 5 density of an initiation set: ``float64 [resolution, resolution]``.
-
-    Entry ``[j, i]`` is the fraction of the ``len(velocities) ** 2`` velocity pairs (default
-    the 25 pairs of ``{-1, -1/2, 0, 1/2, 1}``) for which the observation at the centre of cell
-    (column ``i`` = x, row ``j`` = y; y runs downwards as on the board) lies in the set, so
-    lightness is proportional to the number of velocity combinations inside it.
-
-    Args:
-        classifier_or_bank: an :class:`InitiationClassifier`, an :class:`OptionBank` or an
-            agent with a ``bank``.
-        agent, slot: which agent's which option.
-        resolution: cells per side.
-    """
-    clf = _classifier(classifier_or_bank)
-    if not (0 <= agent < clf.population and 0 <= slot < clf.slots):
-        raise ValueError(f"agent {agent}, slot {slot} out of range for P={clf.population}, "
-                         f"K={clf.slots}")
-    obs = probe_observations(resolution, velocities, dtype=clf.weight.dtype,
-                             device=clf.weight.device, dim=clf.obs_dim)
-    member = contains_many(clf, agent, slot, obs).reshape(resolution, resolution, -1)
-    return member.to(torch.float64).mean(-1).cpu().numpy()
-
-
-def _board_masks(pinball_map, resolution: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(obstacle, target)`` bool ``[R, R]`` masks of the cell centres (row = y)."""
-    from skillchain_torch.agents.region_option import inside_obstacle
-
-    centres = (np.arange(resolution) + 0.5) / resolution
-    y, x = np.meshgrid(centres, centres, indexing="ij")
-    points = torch.as_tensor(np.stack([x.ravel(), y.ravel()], -1), dtype=torch.float64)
-    obstacle = inside_obstacle(points, pinball_map).numpy().reshape(resolution, resolution)
-    tx, ty = pinball_map.target
-    target = (x - tx) ** 2 + (y - ty) ** 2 <= pinball_map.target_radius ** 2
-    return obstacle, target
-
-
-def initiation_image(density: np.ndarray, pinball_map=None, scale: int = 4) -> np.ndarray:
-    """``uint8 [R * scale, R * scale, 3]`` (HWC) picture of a density: grey levels = density,
-    obstacle cells tinted blue and target cells red when ``pinball_map`` is given."""
-    d = np.clip(np.asarray(density, dtype=np.float64), 0.0, 1.0)
-    rgb = np.repeat(d[..., None], 3, axis=-1)
-    if pinball_map is not None:
-        obstacle, target = _board_masks(pinball_map, d.shape[0])
-        rgb[obstacle] = 0.5 * rgb[obstacle] + 0.5 * np.array([0.2, 0.35, 0.8])
-        rgb[target] = np.array([0.9, 0.1, 0.1])
-    image = (rgb * 255.0 + 0.5).astype(np.uint8)
-    return np.kron(image, np.ones((scale, scale, 1), dtype=np.uint8)) if scale > 1 else image
-
-
-def plot_initiation_set(classifier_or_bank, agent: int = 0, slot: int = 0, pinball_map=None,
-                        ax=None, resolution: int = 50, cmap: str = "gray", colorbar: bool = False,
-                        title: str | None = None):
-    """Draw :func:`initiation_density` as an image (with the board's obstacles and target on top
-    when ``pinball_map`` is given); returns the matplotlib ``Axes``.
-
-    Example:
-        >>> import matplotlib; matplotlib.use("Agg")
-        >>> from skillchain_torch.options import InitiationClassifier
-        >>> ax = plot_initiation_set(InitiationClassifier(1, 1), resolution=5)
-        >>> ax.images[0].get_array().shape
-        (5, 5)
-    """
-    if ax is None:
-        import matplotlib.pyplot as plt
-
-        _, ax = plt.subplots(figsize=(5, 5))
-    density = initiation_density(classifier_or_bank, agent, slot, resolution)
-    image = ax.imshow(density, cmap=cmap, vmin=0.0, vmax=1.0, extent=(0.0, 1.0, 1.0, 0.0),
-                      origin="upper", interpolation="nearest", zorder=0)
-    if pinball_map is not None:
-        from skillchain_torch.envs.pinball import plot_trajectories
-
-        plot_trajectories(pinball_map, [], ax=ax, show_starts=False)
-        for patch in ax.patches:
-            patch.set_alpha(0.6)
-    ax.set_xlim(0.0, 1.0)
-    ax.set_ylim(1.0, 0.0)
-    ax.set_aspect("equal")
-    ax.set_title(title if title is not None else f"initiation set: agent {agent}, slot {slot}")
-    if colorbar:
-        ax.figure.colorbar(image, ax=ax, fraction=0.046, label="fraction of velocities in set")
-    return ax
-
-
 class OptionMonitor:
     """Count option use from a :class:`HierarchicalAgent`'s transitions; log per episode.
 
@@ -205,6 +75,8 @@ class OptionMonitor:
         logger: a TorchRL logger with ``log_scalar`` and ``experiment`` (a ``SummaryWriter``),
             e.g. :class:`TensorBoardHook`'s; ``None``: count only (read :meth:`end_episodes`).
         probe_resolution: positions per side of the probe grid for ``initiation_size``.
+        size_every: as ``image_every``, for ``initiation_size`` (probing every episode cost
+            a quarter of a 10 x 100 run).
         image_every: write initiation-set images every this many population episodes (also at
             the first and at the end); 0: never.
         image_agents: agents whose options are drawn.
@@ -220,16 +92,21 @@ class OptionMonitor:
 
     def __init__(self, logger=None, probe_resolution: int = 12, image_every: int = 10,
                  image_agents=(0,), image_resolution: int = 50, per_agent: bool = False,
-                 pinball_map=None):
+                 pinball_map=None, size_every: int = 10):
         self.logger = logger
         self.probe_resolution = int(probe_resolution)
+        self.size_every = int(size_every)
+        self._last_size = 0
         self.image_every = int(image_every)
         self.image_agents = tuple(int(p) for p in image_agents)
         self.image_resolution = int(image_resolution)
         self.per_agent = per_agent
         self.pinball_map = pinball_map
         self.agent = None
-        self._probe: Tensor | None = None
+        self._sizes: SlotMemo | None = None  # the initiation_size probe grid's memberships
+        self._images: SlotMemo | None = None  # the images' grid
+        self._masks = None  # (pinball_map, resolution, obstacle and target masks) of the images
+        self.seconds = 0.0  # wall time spent monitoring (counting, probing, drawing, writing)
         self._totals: dict[int, dict[str, np.ndarray]] = {}
         self._last_image = 0
 
@@ -245,8 +122,15 @@ class OptionMonitor:
         P, K = agent.bank.population, agent.bank.slots
         device = agent.bank.status.device
         zeros = dict(dtype=torch.int64, device=device)
-        self.steps = torch.zeros(P, **zeros)  # steps of the current episode
-        self.option_steps = torch.zeros(P, K, **zeros)
+        # Steps of the current episode under primitive decisions (column 0) and option k
+        # (k + 1): one indexed add a step, the per-step cost being most of the monitor's.
+        self._tally = torch.zeros(P, K + 1, **zeros)
+        self._column = torch.arange(P, device=device) * (K + 1) + 1  # + option = flat index
+        # On the CPU through NumPy views: an operation on ten numbers costs far less there.
+        self._numpy = device.type == "cpu"
+        if self._numpy:
+            self._tally_np = self._tally.view(-1).numpy()
+            self._column_np = self._column.numpy()
         self.executions = torch.zeros(P, K, **zeros)  # ended executions
         self.execution_steps = torch.zeros(P, K, **zeros)
         self.successes = torch.zeros(P, K, **zeros)
@@ -256,7 +140,9 @@ class OptionMonitor:
 
         def transition(next_obs, reward, terminated, truncated, stepped):
             info = original(next_obs, reward, terminated, truncated, stepped)
+            start = time.perf_counter()
             self._count(info, next_obs, terminated, stepped)
+            self.seconds += time.perf_counter() - start
             return info
 
         self._original = original
@@ -269,28 +155,64 @@ class OptionMonitor:
             del self.agent.transition  # the instance attribute; the method shows through
             self.agent = None
 
-    @torch.no_grad()
+    @property
+    def steps(self) -> Tensor:
+        """``[P]`` steps of the current episode."""
+        return self._tally.sum(-1)
+
+    @property
+    def option_steps(self) -> Tensor:
+        """``[P, K]`` steps of the current episode under each option."""
+        return self._tally[:, 1:]
+
     def _count(self, info: dict, next_obs: Tensor, terminated: Tensor, stepped: Tensor) -> None:
+        if self._numpy:  # (no torch.no_grad() there: entering it cost more than the count)
+            return self._count_numpy(info, next_obs, terminated, stepped)
+        with torch.no_grad():
+            self._count_torch(info, next_obs, terminated, stepped.to(torch.bool))
+
+    def _count_torch(self, info, next_obs, terminated, stepped) -> None:
         option = info["option"]
-        stepped = stepped.to(torch.bool)
-        self.steps += stepped
-        under = (option[:, None] == self._slots) & stepped[:, None]  # [P, K]
-        self.option_steps += under
-        ended = under & info["decision_ended"][:, None]
-        if not bool(ended.any()):
+        self._tally.view(-1).index_add_(0, self._column + option, stepped.to(torch.int64))
+        executed = info["decision_ended"] & (option >= 0) & stepped  # an execution ended
+        if not bool(executed.any()):
             return
-        agent = self.agent
+        ended = (option[:, None] == self._slots) & executed[:, None]  # [P, K]
+        duration = info["duration"][:, None]
         self.executions += ended
-        self.execution_steps += ended * info["duration"][:, None]
+        self.execution_steps += ended * duration
+        reached = self._reached(info, next_obs, terminated, stepped)
+        self.successes += ended & reached
+        self.timeouts += ended & ~reached & (duration >= self.agent.max_option_steps)
+
+    def _count_numpy(self, info, next_obs, terminated, stepped) -> None:
+        """The same counts on NumPy views (a (row, slot) index is distinct: ``+=`` adds once)."""
+        if stepped.dtype != torch.bool:
+            stepped = stepped.to(torch.bool)
+        option_np, stepped_np = info["option"].numpy(), stepped.numpy()
+        self._tally_np[self._column_np + option_np] += stepped_np
+        executed = info["decision_ended"].numpy() & (option_np >= 0) & stepped_np
+        if not executed.any():
+            return
+        rows = np.flatnonzero(executed)
+        slots = option_np[rows]
+        duration = info["duration"].numpy()[rows]
+        reached = self._reached(info, next_obs, terminated, stepped).numpy()[rows, slots]
+        self.executions.numpy()[rows, slots] += 1
+        self.execution_steps.numpy()[rows, slots] += duration
+        self.successes.numpy()[rows, slots] += reached
+        self.timeouts.numpy()[rows, slots] += ~reached & (duration >= self.agent.max_option_steps)
+
+    def _reached(self, info, next_obs, terminated, stepped) -> Tensor:
+        """``[P, K]``: each option's target event at ``s'``."""
         reached = info.get("reached")
         if reached is None:  # an agent that does not report its options' targets
+            agent = self.agent
             terminated = terminated.to(torch.bool) & stepped
-            reached = agent.bank.target_reached(next_obs, terminated, agent.events,
-                                                contains=agent.contains)
-        success = ended & reached
-        self.successes += success
-        timeout = ended & ~reached & (info["duration"][:, None] >= agent.max_option_steps)
-        self.timeouts += timeout
+            with torch.no_grad():
+                reached = agent.bank.target_reached(next_obs, terminated, agent.events,
+                                                    contains=agent.contains)
+        return reached
 
     _COUNTERS = ("steps", "option_steps", "executions", "execution_steps", "successes",
                  "timeouts")
@@ -306,7 +228,8 @@ class OptionMonitor:
         index = torch.as_tensor(list(agents), dtype=torch.int64,
                                 device=self.steps.device)
         counts = self.counts(index)
-        for name in self._COUNTERS:
+        self._tally[index] = 0
+        for name in self._COUNTERS[2:]:
             getattr(self, name)[index] = 0
         K = self.option_steps.shape[1]
         for row, episode in enumerate(episodes):
@@ -329,17 +252,18 @@ class OptionMonitor:
     @torch.no_grad()
     def initiation_sizes(self) -> np.ndarray:
         """``[P, K]``: fraction of the probe grid inside each live slot's initiation set
-        (NaN for empty slots)."""
+        (NaN for empty slots). Slots unchanged since the last call are not probed again."""
         bank = self.agent.bank
         clf = bank.classifier
-        if self._probe is None:
-            self._probe = probe_observations(self.probe_resolution, dtype=clf.weight.dtype,
-                                             dim=clf.obs_dim,
-                                             device=clf.weight.device)
+        if self._sizes is None:
+            self._sizes = SlotMemo(probe_observations(self.probe_resolution,
+                                                      dtype=clf.weight.dtype,
+                                                      device=clf.weight.device,
+                                                      dim=clf.obs_dim))
         live = bank.live().cpu().numpy()
         out = np.full(live.shape, np.nan)
         for p, k in zip(*np.nonzero(live)):
-            out[p, k] = float(contains_many(clf, p, k, self._probe).to(torch.float64).mean())
+            out[p, k] = float(self._sizes.contains(clf, p, k).to(torch.float64).mean())
         return out
 
     # ------------------------------------------------------------------ trainer hooks
@@ -352,6 +276,13 @@ class OptionMonitor:
         trainer.register_op("post_train", self.post_train, name=name)
 
     def post_episodes(self, trainer, batch) -> None:
+        start = time.perf_counter()
+        try:
+            self._post_episodes(batch)
+        finally:
+            self.seconds += time.perf_counter() - start
+
+    def _post_episodes(self, batch) -> None:
         counts = self.end_episodes(batch.agents, batch.episodes)
         if self.logger is None:
             return
@@ -378,7 +309,6 @@ class OptionMonitor:
         log = self.logger.log_scalar
         stats = self.episode_stats(episode - 1, pop=True)
         live = self.agent.bank.live().cpu().numpy()
-        sizes = self.initiation_sizes()
         log("options/primitive_step_share", float(stats["primitive_step_share"]), step=episode)
         log("options/live_slots", float(live.sum(-1).mean()), step=episode)
         for k in np.nonzero(live.any(0))[0]:
@@ -388,28 +318,68 @@ class OptionMonitor:
             for key in ("mean_duration", "success_rate", "timeout_rate"):
                 if np.isfinite(stats[key][k]):
                     log(f"{prefix}/{key}", float(stats[key][k]), step=episode)
-            log(f"{prefix}/initiation_size", float(np.nanmean(sizes[:, k])), step=episode)
+        if self.size_every > 0 and (episode == 1 or episode - self._last_size
+                                    >= self.size_every):  # fmt: skip
+            self.log_sizes(episode)
+
+    def log_sizes(self, episode: int) -> None:
+        """Write ``options/slot_{k}/initiation_size`` of the slots live in some agent."""
+        self._last_size = episode
+        live = self.agent.bank.live().cpu().numpy()
+        sizes = self.initiation_sizes()
+        for k in np.nonzero(live.any(0))[0]:
+            self.logger.log_scalar(f"options/slot_{k}/initiation_size",
+                                   float(np.nanmean(sizes[:, k])), step=episode)
 
     def log_images(self, episode: int) -> None:
-        """Write the Figure-5 initiation-set images of ``image_agents``' live slots."""
+        """Write the Figure-5 initiation-set images of ``image_agents``' live slots (a slot
+        unchanged since its last image is not probed again, but written again)."""
         self._last_image = episode
-        live = self.agent.bank.live().cpu().numpy()
+        bank = self.agent.bank
+        clf = bank.classifier
+        R = self.image_resolution
+        if self._images is None:
+            self._images = SlotMemo(probe_observations(R, dtype=clf.weight.dtype,
+                                                       device=clf.weight.device,
+                                                       dim=clf.obs_dim))
+        live = bank.live().cpu().numpy()
         for p in self.image_agents:
             if p >= live.shape[0]:
                 continue
             for k in np.nonzero(live[p])[0]:
-                density = initiation_density(self.agent.bank, p, int(k), self.image_resolution)
-                image = initiation_image(density, self.pinball_map)
+                member = self._images.contains(clf, p, int(k)).reshape(R, R, -1)
+                density = member.to(torch.float64).mean(-1).cpu().numpy()
+                image = initiation_image(density, self.pinball_map, masks=self._board(R))
                 self.logger.experiment.add_image(f"options/initiation/agent_{p}/slot_{k}", image,
                                                  episode, dataformats="HWC")
+
+    def _board(self, resolution: int):
+        """The images' obstacle and target masks, computed once per map and resolution."""
+        if self.pinball_map is None:
+            return None
+        if (self._masks is None or self._masks[0] is not self.pinball_map
+                or self._masks[1] != resolution):  # fmt: skip
+            self._masks = (self.pinball_map, resolution,
+                           board_masks(self.pinball_map, resolution))
+        return self._masks[2]
 
     def post_train(self, trainer) -> None:
         if self.logger is None:
             return
-        episode = int(trainer.episodes_done.min())
-        if self.image_every > 0 and episode > self._last_image:
-            self.log_images(episode)
-        self.logger.experiment.flush()
+        start, threads = time.perf_counter(), torch.get_num_threads()
+        # After train() torch is back at its default threads; these small ops took 10x
+        # longer there on a busy 2-core machine than at the trainer's one thread.
+        torch.set_num_threads(getattr(trainer, "num_threads", None) or threads)
+        try:
+            episode = int(trainer.episodes_done.min())
+            if self.size_every > 0 and episode > self._last_size:
+                self.log_sizes(episode)
+            if self.image_every > 0 and episode > self._last_image:
+                self.log_images(episode)
+            self.logger.experiment.flush()
+        finally:
+            torch.set_num_threads(threads)
+            self.seconds += time.perf_counter() - start
 
 
 def _stats(total: dict, agents: int) -> dict[str, np.ndarray]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import platform
 import sys
+import time
 from pathlib import Path
 
 __all__ = ["OUTPUTS", "train_and_write", "source_commit", "write_discovery"]
@@ -78,6 +79,7 @@ def train_and_write(trainer, out: Path, quiet: bool) -> int:
         tb.close()
         raise
     tb.close()
+    clock = time.perf_counter()
     trainer.write_results(out)
     if discovery is not None:
         write_discovery(trainer, discovery, out)
@@ -96,6 +98,7 @@ def train_and_write(trainer, out: Path, quiet: bool) -> int:
         "compiled_agent": bool(getattr(trainer.agent, "native", False)),
         "machine": platform.processor() or platform.machine(),
         "commit": source_commit(),
+        "seconds": _seconds(trainer, tb, discovery, time.perf_counter() - clock),
     }
     (out / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")
     if not quiet:
@@ -107,6 +110,19 @@ def train_and_write(trainer, out: Path, quiet: bool) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def _seconds(trainer, tb, discovery, outputs: float) -> dict:
+    """Where the run's wall time went, so that the cost of watching a run is measurable
+    without a profiler (issue 29: monitoring and figures at most 10% of the command).
+    ``train`` includes the hooks; ``outputs`` is everything written after training (arrays,
+    ``options.pt``, the figures with their greedy replays)."""
+    monitor = tb.option_monitor.seconds if tb.option_monitor is not None else 0.0
+    hooks = {"option_monitor": monitor, "tensorboard": tb.seconds,
+             "discovery_log": discovery.seconds if discovery is not None else 0.0}
+    watched = sum(hooks.values()) + outputs
+    return {"train": trainer.elapsed, **hooks, "outputs": outputs,
+            "monitoring_and_outputs": watched}
 
 
 def source_commit() -> str | None:

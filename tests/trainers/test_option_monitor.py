@@ -16,6 +16,7 @@ from skillchain_torch.trainers import PopulationTrainer, TensorBoardHook, TrainC
 from skillchain_torch.trainers.option_monitor import (
     VELOCITIES,
     OptionMonitor,
+    SlotMemo,
     contains_many,
     initiation_density,
     initiation_image,
@@ -27,8 +28,9 @@ from skillchain_torch.trainers.option_monitor import (
 X, Y, XD, X2, Y2 = 1, 2, 3, 5, 9
 
 
-def test_doctests():
-    module = importlib.import_module("skillchain_torch.trainers.option_monitor")
+@pytest.mark.parametrize("name", ["option_monitor", "initiation_images"])
+def test_doctests(name):
+    module = importlib.import_module(f"skillchain_torch.trainers.{name}")
     assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 
 
@@ -130,10 +132,12 @@ def run_episode(agent, xs):
     agent.observe_ends(obs(xs[-1]), reward, ones, ~ones, empty, None)
 
 
-def test_counters_timeouts():
+@pytest.mark.parametrize("numpy", [True, False])  # the CPU's NumPy counting, the torch one
+def test_counters_timeouts(numpy):
     agent = scripted_agent(LambdaEvent(lambda o: torch.zeros(o.shape[0], dtype=torch.bool),
                                        "never"))
     monitor = OptionMonitor().attach(agent)
+    monitor._numpy = numpy
     run_episode(agent, [0.2] * 20)  # 20 steps: executions end at 7, 14 (timeouts) and 20
     counts = monitor.end_episodes([0, 1], [0, 0])
     np.testing.assert_array_equal(counts["steps"], [20, 20])
@@ -152,9 +156,11 @@ def test_counters_timeouts():
     assert "transition" not in vars(agent)
 
 
-def test_counters_successes():
+@pytest.mark.parametrize("numpy", [True, False])
+def test_counters_successes(numpy):
     agent = scripted_agent(LambdaEvent(lambda o: o[:, 0] > 0.5, "right"), max_option_steps=100)
     monitor = OptionMonitor().attach(agent)
+    monitor._numpy = numpy
     # Steps 1-3 left, 4 right (success), 5-6 left, 7 right (success), 8-9 left, episode end.
     run_episode(agent, [0.2, 0.2, 0.2, 0.8, 0.2, 0.2, 0.8, 0.2, 0.2])
     counts = monitor.end_episodes([0, 1], [0, 0])
@@ -189,7 +195,10 @@ def test_event_file(option_run):
     tags = set(events.Tags()["scalars"])
     for key in ("step_share", "executions", "initiation_size"):
         assert f"options/slot_0/{key}" in tags
-        assert [e.step for e in events.Scalars(f"options/slot_0/{key}")] == [1, 2, 3]
+        # Every population episode, but the probed sizes: the first, every size_every (10),
+        # and the end.
+        steps = [1, 3] if key == "initiation_size" else [1, 2, 3]
+        assert [e.step for e in events.Scalars(f"options/slot_0/{key}")] == steps
     assert {"options/primitive_step_share", "options/live_slots"} <= tags
     for e in events.Scalars("options/slot_0/step_share"):
         assert 0.0 <= e.value <= 1.0
@@ -205,3 +214,49 @@ def test_monitor_does_not_change_training(option_run):
     cfg = trainer.config
     plain = PopulationTrainer(cfg).train()
     np.testing.assert_array_equal(plain.returns, trainer.returns)
+
+
+def test_numpy_and_torch_counting_agree_on_a_run():
+    config = TrainConfig(agent="skill-chaining", map="pinball_box", runs=3, episodes=4, seed=0)
+    trainer = PopulationTrainer(config)
+    monitors = [OptionMonitor(), OptionMonitor()]
+    for monitor, numpy in zip(monitors, (True, False)):
+        monitor.register(trainer, name=f"options_{numpy}")
+        monitor._numpy = numpy
+    trainer.train()
+    a, b = (m._totals for m in monitors)
+    assert a.keys() == b.keys() == set(range(4))
+    for e in a:
+        for name in a[e]:
+            np.testing.assert_array_equal(a[e][name], b[e][name])
+    assert sum(int(t["executions"].sum()) for t in a.values()) > 0
+
+
+class Shifted(InitiationClassifier):
+    """A user's classifier: the built-in one, read at x - 0.25."""
+
+    def contains_points(self, agent, slot, obs):
+        return super().contains_points(agent, slot, obs - torch.tensor([0.25, 0, 0, 0]))
+
+
+def test_slot_memo_answers_as_a_fresh_call():
+    clf = disc_classifier()
+    memo = SlotMemo(probe_observations(6))
+    fresh = lambda: contains_many(clf, 1, 0, memo.probe)  # noqa: E731
+    assert torch.equal(memo.contains(clf, 1, 0), fresh())
+    assert torch.equal(memo.contains(clf, 1, 0), fresh()) and (memo.misses, memo.hits) == (1, 1)
+    # New examples: constrained, the stored positives decide; then a refit moves the weights.
+    obs = torch.rand(40, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    clf.add_examples(1, 0, obs, obs[:, 0] < 0.4)
+    with torch.no_grad():
+        clf.constrained[1, 0] = True
+    assert torch.equal(memo.contains(clf, 1, 0), fresh()) and memo.misses == 2
+    clf.fit()
+    assert torch.equal(memo.contains(clf, 1, 0), fresh()) and memo.misses == 3
+    assert torch.equal(memo.contains(clf, 1, 0), fresh()) and memo.hits == 2
+    # A classifier of the user's own is asked every time.
+    user = Shifted(population=2, slots=2)
+    user.load_state_dict(clf.state_dict())
+    for _ in range(2):
+        assert torch.equal(memo.contains(user, 1, 0), user.contains_points(1, 0, memo.probe))
+    assert memo.misses == 5

@@ -115,6 +115,11 @@ def test_cli_writes_discovery_outputs_loadable_as_given_options(tmp_path, capsys
     for name in ("returns.npy", "options.pt", "n_options.npy", "option_tree.json",
                  "learning_curve.png", "option_trajectory.png"):  # fmt: skip
         assert (out / name).is_file(), name
+    # Where the time went, for issue 29's budget (monitoring and figures <= 10%).
+    seconds = json.loads((out / "run_info.json").read_text())["seconds"]
+    watched = ("option_monitor", "tensorboard", "discovery_log", "outputs")
+    assert all(seconds[k] > 0 for k in ("train", *watched))
+    assert seconds["monitoring_and_outputs"] == pytest.approx(sum(seconds[k] for k in watched))
     n_options = np.load(out / "n_options.npy")
     assert n_options.shape == (2, 3) and n_options.dtype == np.int64
     bank = OptionBank.load(out / "options.pt")

@@ -7,8 +7,8 @@ import torch
 
 from skillchain_torch.envs.pinball import PinballEnv, physics
 from skillchain_torch.envs.pinball import native as native_module
-from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
 from skillchain_torch.envs.pinball import stepper as stepper_module
+from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
 
 
 def test_doctests():
