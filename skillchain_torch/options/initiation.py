@@ -34,7 +34,6 @@ from skillchain_torch.options import initiation_fit, native_initiation
 from skillchain_torch.options.example_store import ExampleStores
 from skillchain_torch.options.examples import REPLACEMENTS
 from skillchain_torch.options.logistic import logistic_sweeps
-from skillchain_torch.options.nearby import within_any
 from skillchain_torch.options.q_head import _DTYPES, OBS_DIM, dtype_name
 from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask, slot_mask
 
@@ -258,30 +257,17 @@ class InitiationClassifier(ExampleStores, nn.Module):
         ``distance`` (in ``distance_dims``) of a stored positive example for constrained slots.
         """
         p, k = int(agent), int(slot)
-        if not self.builtin_model():  # the subclass's own model, through its logit
-            return initiation_fit.contains_points(self, p, k, obs, _POINTS_CHUNK)
         w, b = self.weight[p, k], self.bias[p, k]
         trained, constrained = bool(self.trained[p, k]), bool(self.constrained[p, k])
-        count = int(self.count[p, k])
-        positives = self.examples[p, k, :count][self.labels[p, k, :count]]  # [M, 4]
         out = []
         for chunk in obs.to(device=w.device, dtype=w.dtype).split(_POINTS_CHUNK):
-            if trained:
-                member = (rowwise_dot(self.phi(chunk), w[None, :]) + b) > 0
-            else:  # true everywhere, but for the constraint (as contains)
+            if not trained:  # true everywhere, but for the constraint (as contains)
                 member = torch.ones(chunk.shape[0], dtype=torch.bool, device=w.device)
-            if constrained:
-                # Only where the logit said yes (as contains), and only against positives in
-                # neighbouring cells (within_any): the dense matrix's answer, bit for bit, in a
-                # tenth of its time on a Figure-5 probe grid.
-                near = torch.zeros_like(member)
-                rows = member.nonzero().flatten()
-                if positives.shape[0] > 0 and rows.numel() > 0:
-                    dims = list(self.distance_dims)
-                    near[rows] = within_any(chunk[rows][:, dims], positives[:, dims],
-                                            self.distance)
-                member = member & near
-            out.append(member)
+            elif self.builtin_model():
+                member = (rowwise_dot(self.phi(chunk), w[None, :]) + b) > 0
+            else:  # the subclass's own model, through its logit
+                member = initiation_fit.points_logit(self, p, k, chunk) > 0
+            out.append(self.near_points(p, k, chunk, member) if constrained else member)
         return torch.cat(out) if out else torch.zeros(0, dtype=torch.bool, device=w.device)
 
     # ----------------------------------------------------------------------------- fitting

@@ -10,7 +10,7 @@ has a model the closed form knows nothing of, so the classifier hands it here:
   ``lr`` unless overridden). With SGD on the logistic model this is the closed-form step.
 * :func:`snapshot`: the model's logits at fixed probe points, ``[P, K, M]``: what the
   convergence test compares between episodes, since a general model has no per-slot weights.
-* :func:`contains_points`: one slot's membership of many states through the model's logit.
+* :func:`points_logit`: one slot's logit at many states (images), through the model's logit.
 
 Example:
     >>> import torch
@@ -37,7 +37,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional
 
-__all__ = ["PROBE_POINTS", "contains_points", "gradient_fit", "probe", "snapshot"]
+__all__ = ["PROBE_POINTS", "gradient_fit", "points_logit", "probe", "snapshot"]
 
 PROBE_POINTS = 64  # states where a model's logits are compared between episodes
 
@@ -94,23 +94,8 @@ def gradient_fit(clf, mask: Tensor, length: int) -> None:
 
 
 @torch.no_grad()
-def contains_points(clf, agent: int, slot: int, obs: Tensor, chunk: int) -> Tensor:
-    """``BoolTensor [N]``: slot ``slot`` of agent ``agent`` at ``obs [N, D]`` by the model's
-    logit, with the classifier's rule (true everywhere untrained; near a positive when
-    constrained). The logit takes every agent's row, so the points go to all P (rows other
-    than ``agent`` are discarded): P times the work, fine for images."""
-    p, k = int(agent), int(slot)
-    count = int(clf.count[p, k])
-    positives = clf.examples[p, k, :count][clf.labels[p, k, :count]]
-    out = []
-    for part in obs.to(device=clf.examples.device, dtype=clf.examples.dtype).split(chunk):
-        if bool(clf.trained[p, k]):
-            member = clf.logit(part.expand(clf.population, -1, -1))[p, :, k] > 0
-        else:
-            member = torch.ones(part.shape[0], dtype=torch.bool, device=part.device)
-        if bool(clf.constrained[p, k]):
-            near = (clf._within(part, positives).any(-1) if positives.shape[0]
-                    else torch.zeros_like(member))  # fmt: skip
-            member = member & near
-        out.append(member)
-    return torch.cat(out) if out else torch.zeros(0, dtype=torch.bool, device=obs.device)
+def points_logit(clf, agent: int, slot: int, points: Tensor) -> Tensor:
+    """``[N]``: slot ``slot``'s logit at ``points [N, D]`` for agent ``agent``, through the
+    model's logit (the points go to every agent's row, the others discarded: P times the work,
+    fine for images)."""
+    return clf.logit(points.expand(clf.population, -1, -1))[int(agent), :, int(slot)]
