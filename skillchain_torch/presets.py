@@ -48,7 +48,21 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = ["Preset", "PAPER", "DEFAULT", "PRESETS", "PRESET_NAMES", "PRESET_FIELDS",
-           "preset_named", "differences", "instance_defaults"]
+           "preset_named", "differences", "instance_defaults", "env_order", "env_alpha"]
+
+
+def env_order(dim: int) -> int:
+    """The default Fourier order off Pinball: the highest up to 4 with ``(order + 1) ** dim
+    <= 10,000`` features (4 for 2-4 dims, 3 for 6, 2 for 8), at least 1."""
+    return max([1] + [o for o in range(1, 5) if (o + 1) ** dim <= 10_000])
+
+
+def env_alpha(order: int, dim: int) -> float:
+    """The default step size off Pinball: the paper's ``alpha * num_features`` on the first
+    instance (0.001 x 625) over the env's ``(order + 1) ** dim`` features, so that one update
+    moves a value about as far as on Pinball (a Fourier vector's squared norm is about half
+    its length): 0.025 on MountainCar at order 4, 0.00015 on Acrobot at order 3."""
+    return 0.001 * 625 / (order + 1) ** dim
 
 
 def instance_defaults(map_name: str | None) -> tuple[int, float]:

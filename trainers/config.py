@@ -35,11 +35,23 @@ from pathlib import Path
 from typing import Any
 
 from skillchain_torch.discovery.readings import InitiationReading
-from skillchain_torch.presets import PRESET_FIELDS, instance_defaults, preset_named
+from skillchain_torch.presets import (
+    PRESET_FIELDS,
+    env_alpha,
+    env_order,
+    instance_defaults,
+    preset_named,
+)
 from skillchain_torch.resources import available_memory
-from skillchain_torch.resources import format_bytes as _size
 
-from .config_checks import ConfigError, check_device, memory_estimate, short, type_problem
+from .config_checks import (
+    ConfigError,
+    check_device,
+    check_memory,
+    memory_estimate,
+    short,
+    type_problem,
+)
 
 __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "RESUME_FIELDS",
            "LEGACY_FIELDS", "UNREAD_FIELDS", "LABEL_FIELDS", "PRESET_CONFIG_FIELDS", "INT64_MAX"]
@@ -72,20 +84,6 @@ UNREAD_FIELDS = {
     "given-options": _DISCOVERY_FIELDS,
     "skill-chaining": ("options", "options_agent"),
 }
-
-
-def env_order(dim: int) -> int:
-    """The default Fourier order off Pinball: the highest up to 4 with ``(order + 1) ** dim
-    <= 10,000`` features (4 for 2-4 dims, 3 for 6, 2 for 8), at least 1."""
-    return max([1] + [o for o in range(1, 5) if (o + 1) ** dim <= 10_000])
-
-
-def env_alpha(order: int, dim: int) -> float:
-    """The default step size off Pinball: the paper's ``alpha * num_features`` on the first
-    instance (0.001 x 625) over the env's ``(order + 1) ** dim`` features, so that one update
-    moves a value about as far as on Pinball (a Fourier vector's squared norm is about half
-    its length): 0.025 on MountainCar at order 4, 0.00015 on Acrobot at order 3."""
-    return 0.001 * 625 / (order + 1) ** dim
 
 
 def paper_defaults(map_name: str) -> tuple[int, float]:
@@ -137,17 +135,10 @@ class TrainConfig:
             the initiation-set reading of skill chaining (see
             :class:`~skillchain_torch.discovery.InitiationReading`; default preset
             ``pos20-fitted-cstart``, ``results/screening/README.md``).
-        failure_bootstrap: (preset) what a timed-out option execution's SMDP target
-            bootstraps on (``"decision"``: Sarsa's ``Q(s', d')``, the paper; ``"primitives"``:
-            the best primitive at ``s'``; see :class:`~skillchain_torch.agents.
-            HierarchicalAgent`).
-        intra_option_primitives: (preset) the top level's primitive values also learn, by
-            one-step Q-learning, from the steps taken inside options (the paper: only from the
-            agent's own primitive decisions; see :class:`~skillchain_torch.agents.
-            HierarchicalAgent`).
-        option_interruption: (preset) an executing option stops where it is no longer the top
-            level's greedy decision (Sutton, Precup & Singh 1999; the paper's options run to
-            their end; see :class:`~skillchain_torch.agents.HierarchicalAgent`).
+        failure_bootstrap, intra_option_primitives: (preset) see
+            :class:`~skillchain_torch.agents.HierarchicalAgent`'s arguments of those names.
+        option_interruption: (preset) ``interruption`` of
+            :class:`~skillchain_torch.agents.HierarchicalAgent`.
         keep_negatives: (preset) the initiation classifiers' stores never drop a failure to
             make room for a success's positives (see :class:`~skillchain_torch.options.
             InitiationClassifier`).
@@ -354,34 +345,13 @@ class TrainConfig:
                               f"{self.initiation_bias}", ("initiation_start", "initiation_bias"))
         check_device(self.device)
         if memory:
-            self._check_memory()
+            check_memory(self, available_memory, _BASE_BYTES)  # (tests patch the reader here)
         return self
 
     def memory_estimate(self) -> list[tuple[tuple[str, ...], str, int, bool]]:
         """The run's largest arrays, ``(fields, what, bytes, on_device)`` each (sizes only;
         see :func:`~.config_checks.memory_estimate`)."""
         return memory_estimate(self)
-
-    def _check_memory(self) -> None:
-        import torch
-
-        terms = self.memory_estimate()
-        on_cpu = torch.device(self.device).type == "cpu"
-        pools = [(terms if on_cpu else [t for t in terms if not t[3]], "cpu")]
-        if not on_cpu:
-            pools.append(([t for t in terms if t[3]], self.device))
-        for pool, device in pools:
-            need = sum(t[2] for t in pool) + (_BASE_BYTES if device == "cpu" else 0)
-            have = available_memory(device)
-            if have is None or need <= have:
-                continue
-            fields, what, size, _ = max(pool, key=lambda t: t[2])
-            values = self.resolved().to_dict()
-            named = " x ".join(f"{f} {values[f]}" for f in fields)
-            where = "memory" if device == "cpu" else f"{device} memory"
-            raise ConfigError(
-                f"the run needs an estimated {_size(need)} of {where} for {named} ({what}: "
-                f"{_size(size)}), more than the {_size(have)} available", fields)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

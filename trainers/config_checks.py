@@ -15,8 +15,9 @@ import os
 from typing import Any
 
 from skillchain_torch.resources import device_problem
+from skillchain_torch.resources import format_bytes as _size
 
-__all__ = ["ConfigError", "short", "type_problem", "check_device", "memory_estimate"]
+__all__ = ["ConfigError", "short", "type_problem", "check_device", "check_memory", "memory_estimate"]
 
 
 class ConfigError(ValueError):
@@ -95,3 +96,28 @@ def memory_estimate(config) -> list[tuple[tuple[str, ...], str, int, bool]]:
         terms.append((("runs", "slots"), "option banks [runs, slots, ...]",
                       runs * int(config.slots) * per_slot, True))
     return terms
+
+
+def check_memory(config, available_memory, base_bytes: int) -> None:
+    """``ConfigError`` naming the fields whose arrays would not fit in the memory available now
+    (:func:`memory_estimate`, plus ``base_bytes`` for the interpreter on the CPU).
+    ``available_memory(device)``: bytes free, or ``None`` when unknown (then no check)."""
+    import torch
+
+    terms = config.memory_estimate()
+    on_cpu = torch.device(config.device).type == "cpu"
+    pools = [(terms if on_cpu else [t for t in terms if not t[3]], "cpu")]
+    if not on_cpu:
+        pools.append(([t for t in terms if t[3]], config.device))
+    for pool, device in pools:
+        need = sum(t[2] for t in pool) + (base_bytes if device == "cpu" else 0)
+        have = available_memory(device)
+        if have is None or need <= have:
+            continue
+        fields, what, size, _ = max(pool, key=lambda t: t[2])
+        values = config.resolved().to_dict()
+        named = " x ".join(f"{f} {values[f]}" for f in fields)
+        where = "memory" if device == "cpu" else f"{device} memory"
+        raise ConfigError(
+            f"the run needs an estimated {_size(need)} of {where} for {named} ({what}: "
+            f"{_size(size)}), more than the {_size(have)} available", fields)
