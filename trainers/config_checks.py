@@ -17,7 +17,8 @@ from typing import Any
 from skillchain_torch.resources import device_problem
 from skillchain_torch.resources import format_bytes as _size
 
-__all__ = ["ConfigError", "short", "type_problem", "check_device", "check_memory", "memory_estimate"]
+__all__ = ["ConfigError", "short", "type_problem", "check_device", "check_memory",
+           "memory_estimate"]
 
 
 class ConfigError(ValueError):
