@@ -29,13 +29,14 @@ Example:
 
 from __future__ import annotations
 
-import time
 from collections import Counter
 
 import numpy as np
 import torch
 
 from skillchain_torch.options import OptionStatus
+
+from .timed import TimedHook
 
 __all__ = ["DiscoveryLog", "option_tree"]
 
@@ -62,7 +63,7 @@ def option_tree(agent) -> dict:
             "agents": agents}  # fmt: skip
 
 
-class DiscoveryLog:
+class DiscoveryLog(TimedHook):
     """Record options per episode and log discovery events (see the module docstring).
 
     Args:
@@ -90,13 +91,6 @@ class DiscoveryLog:
         trainer.register_op("post_episodes", self.post_episodes, name=name)
         trainer.register_op("post_train", self.post_train, name=name)
         trainer.register_module(name, self)
-
-    def post_episodes(self, trainer, batch) -> None:
-        start = time.perf_counter()
-        try:
-            self._post_episodes(trainer, batch)
-        finally:
-            self.seconds += time.perf_counter() - start
 
     def _post_episodes(self, trainer, batch) -> None:
         agent = trainer.agent

@@ -22,11 +22,12 @@ Example:
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 from torchrl.record.loggers import TensorboardLogger
+
+from .timed import TimedHook
 
 __all__ = ["TensorBoardHook", "population_interval", "experiment_name", "log_population_arrays"]
 
@@ -92,7 +93,7 @@ def log_population_arrays(logger, config, returns, lengths, n_options=None,
     logger.experiment.flush()
 
 
-class TensorBoardHook:
+class TensorBoardHook(TimedHook):
     """Trainer hook writing per-episode scalars to a TorchRL ``TensorboardLogger``.
 
     Args:
@@ -132,13 +133,6 @@ class TensorBoardHook:
         if trainer.global_step > 0:
             return  # resumed: the hyperparameters are already logged
         log_config(self.logger, trainer.config)
-
-    def post_episodes(self, trainer, batch) -> None:
-        start = time.perf_counter()
-        try:
-            self._post_episodes(trainer, batch)
-        finally:
-            self.seconds += time.perf_counter() - start
 
     def _post_episodes(self, trainer, batch) -> None:
         log = self.logger.log_scalar
