@@ -23,11 +23,8 @@ from skillchain_torch.options.examples import reservoir_uniform, store_places
 from skillchain_torch.options.initiation import InitiationClassifier
 from skillchain_torch.options.io import register_classifier, register_q_head
 from skillchain_torch.options.logistic import logistic_sweeps
-from skillchain_torch.options.q_head import (
-    FourierOptionQHead,
-    MLPOptionQHead,
-    OptionQHead,
-)
+from skillchain_torch.options.mlp_q_head import MLPOptionQHead
+from skillchain_torch.options.q_head import FourierOptionQHead, OptionQHead
 from skillchain_torch.options.status import OptionStatus, slot_mask
 from skillchain_torch.options.termination import (
     GoalEvent,

@@ -33,7 +33,8 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.options.initiation import InitiationClassifier
-from skillchain_torch.options.q_head import FourierOptionQHead, MLPOptionQHead, OptionQHead
+from skillchain_torch.options.mlp_q_head import MLPOptionQHead
+from skillchain_torch.options.q_head import FourierOptionQHead, OptionQHead
 
 __all__ = ["CLASSIFIERS", "Q_HEADS", "Unregistered", "content_digest", "lookup", "read_torch_file",
            "register_classifier", "register_q_head"]

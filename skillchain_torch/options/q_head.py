@@ -2,7 +2,8 @@
 
 The paper (section 5.1) learns each option's policy by Q-learning with a 3rd-order Fourier basis
 (256 features per action, ``alpha_o = 0.0005``). :class:`FourierOptionQHead` is that learner,
-batched over ``[P, K]``; :class:`MLPOptionQHead` is a neural drop-in with the same interface.
+batched over ``[P, K]``; :class:`~skillchain_torch.options.mlp_q_head.MLPOptionQHead` is a
+neural drop-in with the same interface.
 
 Example:
     >>> import torch
@@ -20,18 +21,15 @@ Example:
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from typing import Any
 
 import torch
 from torch import Tensor, nn
-from torch.func import functional_call, grad, stack_module_state, vmap
 
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.invariant import rowwise_dot
-from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask, slot_mask
-from skillchain_torch.rng import CounterRNG
+from skillchain_torch.options.status import agent_index, check_slot_mask, slot_mask
 
 NUM_ACTIONS = 5
 OBS_DIM = 4
@@ -289,170 +287,4 @@ class FourierOptionQHead(OptionQHead):
         index = agent_index(index, self.population).to(self.weight.device)
         new = type(self)(**{**self.config, "population": len(index)}, device=self.weight.device)
         new.weight.copy_(self.weight[index])
-        return new
-
-
-def _mlp(hidden: int, layers: int, num_actions: int, dtype: torch.dtype,
-         obs_dim: int = OBS_DIM) -> nn.Sequential:  # fmt: skip
-    sizes = [obs_dim] + [hidden] * layers
-    modules: list[nn.Module] = []
-    for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
-        modules += [nn.Linear(fan_in, fan_out, dtype=dtype, device="meta"), nn.Tanh()]
-    modules.append(nn.Linear(sizes[-1], num_actions, dtype=dtype, device="meta"))
-    return nn.Sequential(*modules)
-
-
-class MLPOptionQHead(OptionQHead):
-    """Neural option Q-functions: one small MLP per ``(agent, slot)``, stacked with ``torch.func``.
-
-    Args:
-        population, slots, num_actions: as :class:`FourierOptionQHead`.
-        hidden: width of the hidden layers; layers: how many (tanh activations).
-        lr: SGD step size on the squared TD error ``0.5 * (target - Q_k(s, a))^2``.
-        q_scale: the network outputs ``Q / q_scale``; with Pinball's returns (thousands) a scale
-            of the order of the returns (e.g. 1000) keeps gradients tame.
-        seed: int (agent p uses ``seed + p``) or ``LongTensor [P]``; initial weights of a slot
-            come from a :class:`~skillchain_torch.rng.CounterRNG` stream of its agent.
-
-    The P*K networks are ``torch.func.stack_module_state`` copies of one template held as
-    parameters ``[P, K, ...]`` and evaluated with ``vmap(functional_call)``. Hidden layers start
-    uniform in ``+-1/sqrt(fan_in)`` (PyTorch's default range); the output layer starts at zero so
-    a fresh slot has ``Q = 0`` like the linear head. Each slot's loss depends only on its own
-    parameters, so masked-out slots receive zero gradient and stay unchanged.
-
-    Not bit-reproducible across population sizes: vmapped ``matmul`` and autograd reductions
-    may block differently for different P (the initial weights are, the trained ones need not
-    be). Use :class:`FourierOptionQHead` where the population contract matters.
-    """
-
-    def __init__(
-        self,
-        population: int,
-        slots: int,
-        hidden: int = 64,
-        layers: int = 2,
-        num_actions: int = NUM_ACTIONS,
-        lr: float = 1e-3,
-        q_scale: float = 1.0,
-        seed: int | Tensor = 0,
-        dtype: torch.dtype | str = torch.float64,
-        device: torch.device | str | None = None,
-        obs_dim: int = OBS_DIM,
-    ):
-        super().__init__()
-        dtype = _DTYPES[dtype] if isinstance(dtype, str) else dtype
-        if population < 1 or slots < 1 or num_actions < 1 or hidden < 1 or layers < 1:
-            raise ValueError("population, slots, num_actions, hidden, layers must be >= 1")
-        self.population, self.slots, self.num_actions = population, slots, num_actions
-        self.obs_dim = int(obs_dim)
-        self.lr, self.q_scale = float(lr), float(q_scale)
-        self._dtype = dtype
-        self.config = dict(
-            population=population, slots=slots, hidden=hidden, layers=layers,
-            num_actions=num_actions, lr=self.lr, q_scale=self.q_scale, dtype=dtype_name(dtype),
-        )  # fmt: skip
-        if self.obs_dim != OBS_DIM:
-            self.config["obs_dim"] = self.obs_dim
-        template = _mlp(hidden, layers, num_actions, dtype, self.obs_dim)
-        object.__setattr__(self, "_template", template)  # not a submodule: no own state
-        # One network's stacked layout ([1, ...] per parameter) widened to [P, K, ...].
-        layout, _ = stack_module_state([template])
-        self._names = list(layout)
-        shapes = {self._key(n): (population, slots, *v.shape[1:]) for n, v in layout.items()}
-        self.params = nn.ParameterDict(
-            {k: nn.Parameter(torch.zeros(shape, dtype=dtype, device=device), requires_grad=False)
-             for k, shape in shapes.items()}
-        )  # fmt: skip
-        seeds = agent_seeds(seed, population)
-        self.register_buffer("rng_seeds", seeds.to(device))
-        self.register_buffer("rng_counter", torch.zeros_like(self.rng_seeds))
-        self.reset_slots(torch.ones(population, slots, dtype=torch.bool, device=device))
-
-    @staticmethod
-    def _key(name: str) -> str:
-        return name.replace(".", "__")
-
-    def _stacked(self) -> dict[str, Tensor]:
-        n = self.population * self.slots
-        stacked = {}
-        for name in self._names:
-            param = self.params[self._key(name)]
-            stacked[name] = param.reshape(n, *param.shape[2:])
-        return stacked
-
-    def _net(self, params: dict[str, Tensor], x: Tensor) -> Tensor:
-        return functional_call(self._template, params, (x,)) * self.q_scale
-
-    def _inputs(self, obs: Tensor) -> Tensor:
-        self._check_obs(obs)
-        x = obs.to(self._dtype) * 2.0 - 1.0  # observations in [0, 1] -> [-1, 1]
-        return x[:, None, :].expand(-1, self.slots, -1).reshape(-1, self.obs_dim)
-
-    def forward(self, obs: Tensor) -> Tensor:
-        q = vmap(self._net)(self._stacked(), self._inputs(obs))
-        return q.reshape(self.population, self.slots, self.num_actions)
-
-    def td_update(self, obs: Tensor, action: Tensor, target: Tensor, mask: Tensor) -> Tensor:
-        mask = self._check_update(obs, action, target, mask)
-        dtype = self._dtype
-        act = torch.where(mask.any(-1), action.to(torch.int64), torch.zeros_like(action))
-        act = act[:, None].expand(-1, self.slots).reshape(-1)
-        weight = mask.reshape(-1).to(dtype)
-        goal = torch.where(mask, target.to(dtype), torch.zeros((), dtype=dtype)).reshape(-1)
-
-        def slot_loss(params, x, a, y, m):
-            q_sa = torch.gather(self._net(params, x), 0, a[None])[0]
-            delta = y - q_sa
-            return 0.5 * m * delta * delta, delta
-
-        with torch.no_grad():
-            grads, delta = vmap(grad(slot_loss, has_aux=True))(
-                self._stacked(), self._inputs(obs), act, goal, weight
-            )
-            for name in self._names:
-                param = self.params[self._key(name)]
-                param.sub_(self.lr * grads[name].reshape(param.shape))
-        delta = delta.reshape(self.population, self.slots)
-        return torch.where(mask, delta, torch.zeros_like(delta))
-
-    def slot_tensors(self) -> dict[str, Tensor]:
-        return {key: param.data for key, param in self.params.items()}
-
-    @torch.no_grad()
-    def reset_slots(self, mask: Tensor) -> None:
-        mask = check_slot_mask(mask, self.population, self.slots)
-        output = f"{len(self._template) - 1}."  # the output layer's weight and bias start at 0
-        sizes = [self.params[self._key(n)][0, 0].numel() for n in self._names]
-        rng = CounterRNG(self.rng_seeds, stream=0x0B7, counter=self.rng_counter)
-        for k in range(self.slots):
-            chosen = mask[:, k]
-            if not bool(chosen.any()):
-                continue
-            draws = rng.uniform(sum(sizes), mask=chosen) * 2.0 - 1.0  # [P, n] in [-1, 1)
-            offset = 0
-            for name, size in zip(self._names, sizes):
-                param = self.params[self._key(name)]
-                weight_name = name.rsplit(".", 1)[0] + ".weight"  # a bias uses its layer's fan-in
-                fan_in = self.params[self._key(weight_name)].shape[-1]
-                value = draws[:, offset : offset + size] / math.sqrt(fan_in)
-                offset += size
-                if name.startswith(output):
-                    value = torch.zeros_like(value)
-                value = value.to(param.dtype).reshape(self.population, *param.shape[2:])
-                param[:, k] = torch.where(
-                    chosen.reshape(-1, *[1] * (param.ndim - 2)), value, param[:, k]
-                )
-        self.rng_counter.copy_(rng.counter)
-
-    def select_agents(self, index, seeds: Tensor | None = None) -> MLPOptionQHead:
-        device = self.rng_seeds.device
-        index = agent_index(index, self.population).to(device)
-        new_seeds = self.rng_seeds[index] if seeds is None else torch.as_tensor(seeds)
-        new = type(self)(**{**self.config, "population": len(index)}, seed=new_seeds,
-                         device=device)  # fmt: skip
-        with torch.no_grad():
-            for key, param in self.params.items():
-                new.params[key].copy_(param[index])
-            if seeds is None:
-                new.rng_counter.copy_(self.rng_counter[index])
         return new
