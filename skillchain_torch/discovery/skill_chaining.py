@@ -39,39 +39,31 @@ Example:
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
 from torch import Tensor
 
-from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import GoalEvent, OptionBank, OptionStatus, TerminationPredicate
-from skillchain_torch.options.status import slot_mask
 
 from . import native_discovery
 from .convergence import CONVERGENCE_EPISODES, CONVERGENCE_THRESHOLD, ConvergenceTest
-from .creation import choose_creation, covered_start
-from .events import MAX_BRANCHING, entered, evaluate_base_events, event_list, target_indicator
-from .executions import ExecutionTrace, execution_outcome
+from .episode_rules import EpisodeRules
+from .events import MAX_BRANCHING, entered, evaluate_base_events, target_indicator
+from .executions import ExecutionTrace
 from .gestation import (
     GESTATION_EPISODES,
     POLICY_STARTS,
     VALUE_STARTS,
     RecentStates,
-    cached_projection,
-    gestation_over,
-    initialise_option_policies,
-    initialise_option_values,
-    state_value_fit,
 )
 from .overlap import exclude_overlap, overlap_exclusion
 from .readings import FIRST_READING, InitiationReading
+from .step_rules import StepRules
 
 __all__ = ["SkillChaining", "DiscoveryEvent"]
 
-logger = logging.getLogger("skillchain_torch.discovery")
 MAX_OPTION_STEPS = 250
 
 
@@ -93,7 +85,7 @@ class DiscoveryEvent:
     value: float = float("nan")
 
 
-class SkillChaining:
+class SkillChaining(StepRules, EpisodeRules):
     """Skill-chaining discovery for a population of agents sharing an :class:`OptionBank`.
 
     Args:
@@ -305,166 +297,6 @@ class SkillChaining:
         """The caller re-evaluated the memberships at ``s'`` of the agents in ``created [P]``
         (:meth:`membership`): keep those rows' own sets as the current ones."""
         self.raw_now = torch.where(created[:, None], self.last_raw, self.raw_now)
-
-    def _gestation_hits(self, raw_now: Tensor, reached: Tensor, stepped: Tensor) -> Tensor:
-        """``[P, K]``: gestating options whose target was entered by this transition."""
-        gestating = self.bank.status == OptionStatus.GESTATING
-        hit = reached & gestating
-        if not bool(hit.any()):  # the usual step: no target of a gestating option at s'
-            return hit
-        before = target_indicator(self.bank, self.base_now, raw_now)
-        return entered(before, reached) & gestating & stepped[:, None]
-
-    def _gestation_positives(self, hits: Tensor) -> None:
-        """The last ``reading.gestation_positives`` states of each agent's trajectory become
-        positive examples of the slots in ``hits [P, K]`` (their target just fired)."""
-        if not bool(hits.any()):
-            return
-        classifier, n = self.bank.classifier, self.reading.gestation_positives
-        for p, k in hits.nonzero().tolist():
-            rows = torch.zeros_like(self.episode, dtype=torch.bool)
-            rows[p] = True
-            agents, obs = self.recent.window(rows, n)
-            labels = torch.ones_like(agents, dtype=torch.bool)
-            classifier.add_examples(agents, k, obs, labels)
-
-    def _finish_executions(self, option: Tensor, reached: Tensor, duration: Tensor,
-                           ended: Tensor, terminated: Tensor) -> None:  # fmt: skip
-        """Examples, refits and dropped updates of the executions that ended."""
-        if native_discovery.applies(option, reached):  # the same outcomes, compiled
-            slot, success, failure, any_ended, any_failure = native_discovery.outcomes(
-                option, reached, duration, ended, terminated, self.max_option_steps,
-                self._outcomes_out)  # fmt: skip
-            if not any_ended:
-                return
-        else:
-            ended = ended & (option >= 0)
-            if not bool(ended.any()):
-                return
-            slot = option.clamp(min=0)
-            hit = reached.gather(1, slot[:, None])[:, 0]
-            success, failure = execution_outcome(hit, duration, terminated,
-                                                 self.max_option_steps)  # fmt: skip
-            success, failure = success & ended, failure & ended
-            any_failure = bool(failure.any())
-        classifier = self.bank.classifier
-        touched = self.trace.store_examples(classifier, slot, duration, success, failure)
-        # Paper: 100 sweeps per new data point. Logistic regression on failures alone says
-        # "no" everywhere (the features are non-negative), so an option whose first executions
-        # all fail leaves the repertoire; wait_for_both_classes keeps such a set "true
-        # everywhere" until it has seen a success and a failure instead.
-        fit = touched & classifier.has_both_classes() if self.wait_for_both_classes else touched
-        if bool(fit.any()):
-            classifier.fit(fit)
-            self.fitted |= fit
-        if any_failure:
-            self.trace.drop_updates(slot, failure)
-
-    def _create(self, base_trig: Tensor, slot_trig: Tensor, contains: Tensor, option: Tensor,
-                sample: Tensor) -> Tensor:  # fmt: skip
-        bank = self.bank
-        base_on, slot_on = event_list(bank, len(self.events), self.max_branching)
-        # An agent whose slots are full creates nothing; once its first blocked creation is
-        # logged its triggers need no more work. (Late in a run every agent is full, and some
-        # agent enters a learned option's set at nearly every step.)
-        full = bank.full()
-        open_ = (~(full & self.slots_full_logged))[:, None]
-        base_trig, slot_trig = base_trig & base_on & open_, slot_trig & slot_on & open_
-        if not (bool(base_trig.any()) or bool(slot_trig.any())):  # nothing can be created
-            return torch.zeros(bank.population, dtype=torch.bool, device=base_trig.device)
-        base_cov, slot_cov = covered_start(bank, len(self.events), contains, option)
-        create, target_event, parent = choose_creation(base_trig, slot_trig, base_cov, slot_cov)
-        if not bool(create.any()):
-            return create
-        self._log_slots_full(create & full)
-        create = create & ~full
-        if not bool(create.any()):
-            return create
-        slot = bank.allocate(create, target_event=target_event, parent=parent,
-                             episode=self.episode)  # fmt: skip
-        new = slot_mask(create, slot, bank.slots)
-        self.gestation_q = torch.where(new, sample[:, None], self.gestation_q)
-        self.convergence.reset(new)
-        self.fitted &= ~new
-        self.episode_weights = torch.where(new[..., None], bank.classifier.snapshot(),
-                                           self.episode_weights)  # fmt: skip
-        self._exclusion = None
-        if self.recent is not None:  # the creating hit is the first of gestation
-            self._gestation_positives(new)
-        for p in create.nonzero()[:, 0].tolist():
-            k = int(slot[p])
-            self._emit("created", p, k, target=self.target_name(p, k))
-        return create
-
-    def _log_slots_full(self, blocked: Tensor) -> None:
-        first = blocked & ~self.slots_full_logged
-        if not bool(first.any()):
-            return
-        self.slots_full_logged |= first
-        for p in first.nonzero()[:, 0].tolist():
-            self._emit("slots_full", p, -1)
-            logger.info("agent %d: all %d option slots are used; it creates no more options",
-                        p, self.bank.slots)
-
-    # ------------------------------------------------------------------ per episode
-    def end_episodes(self, rows: Tensor, q_head: LinearQHead) -> None:
-        """Agents ``rows [P]`` ended an episode: convergence and chaining, end of gestation."""
-        bank, classifier = self.bank, self.bank.classifier
-        learning = bank.status == OptionStatus.LEARNING
-        counted = rows[:, None] & learning & self.fitted
-        if bool(counted.any()):
-            change = classifier.weight_change(self.episode_weights)
-            converged = self.convergence.update(change, counted)
-            learned = converged & classifier.stored_classes()[0]  # needs a positive example
-            if bool(learned.any()):
-                bank.set_status(learned, OptionStatus.LEARNED)
-                classifier.constrain(learned)  # distance 0.1 from a positive example
-                for p, k in learned.nonzero().tolist():
-                    self._emit("learned", p, k, target=self.target_name(p, k))
-        join = gestation_over(bank, self.episode, rows, self.gestation)
-        if bool(join.any()):
-            self._start_sets(join)
-            value = torch.nan_to_num(self.gestation_q, neginf=0.0)
-            bank.set_status(join, OptionStatus.LEARNING)
-            initialise_option_values(q_head, join, value, q_head.num_decisions - bank.slots)
-            if self.value_start == "agent":
-                self._agent_values(q_head, join)
-            if self.policy_start == "top-level":
-                if self._projection is None:  # once per run: a fixed grid, no random numbers
-                    self._projection = cached_projection(self.top_basis, bank.q_head.basis)
-                initialise_option_policies(bank.q_head, q_head, join, self._projection,
-                                           bank.num_actions)  # fmt: skip
-            for p, k in join.nonzero().tolist():
-                self._emit("joined", p, k, target=self.target_name(p, k),
-                           value=float(value[p, k]))  # fmt: skip
-        self.episode = self.episode + rows.to(torch.int64)
-        self.episode_weights = torch.where(rows[:, None, None], classifier.snapshot(),
-                                           self.episode_weights)  # fmt: skip
-        self.fitted = self.fitted & ~rows[:, None]
-
-    @torch.no_grad()
-    def _agent_values(self, q_head: LinearQHead, join: Tensor) -> None:
-        """``Q(s, o) = max_a Q(s, a) + value_bonus`` (fitted) for the options in ``join``."""
-        if self._value_fit is None:  # once per run: a fixed grid, no random numbers
-            self._value_fit = state_value_fit(self.top_basis)
-        primitives = q_head.weight.shape[1] - self.bank.slots
-        for p, k in join.nonzero().tolist():
-            w = self._value_fit(q_head.weight[p, :primitives])
-            w[0] += self.value_bonus
-            q_head.weight[p, primitives + k] = w.to(q_head.weight.dtype)
-
-    def _start_sets(self, join: Tensor) -> None:
-        """The initiation sets of the options in ``join [P, K]`` as gestation ends, by the
-        reading: fitted on their gestation positives (``start="fitted"``), and under the
-        distance constraint from now on (``constrain="start"``)."""
-        classifier = self.bank.classifier
-        if self.reading.start == "fitted":
-            positive, negative = classifier.stored_classes()
-            fit = join & positive & (negative | self.reading.one_class_fits)
-            if bool(fit.any()):
-                classifier.fit(fit)
-        if self.reading.constrain == "start":
-            classifier.constrain(join)
 
     # ------------------------------------------------------------------ reading
     def target_name(self, agent: int, slot: int) -> str:
