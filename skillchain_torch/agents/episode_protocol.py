@@ -45,13 +45,11 @@ class EpisodeProtocol:
         out[self._index] = rows_value if rows_value.dtype == out.dtype else rows_value.to(out.dtype)
         return out
 
-    @torch.no_grad()
     def begin(self, obs: Tensor) -> Tensor:
         """First decisions of every active agent at its start observation ``[n, 4]``."""
         self._start_decisions(self._full(obs, self.obs), self.active.clone())
         return self.actions
 
-    @torch.no_grad()
     def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
         """Learn from a step in which no episode ended; the next actions ``[n]``."""
         none = torch.zeros_like(self.active)
@@ -59,7 +57,6 @@ class EpisodeProtocol:
                         none, none, self.active)
         return self.actions
 
-    @torch.no_grad()
     def observe_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
                      restart_rows: Tensor, start_obs: Tensor | None) -> Tensor:
         """Like :meth:`observe` when some episodes ended (see ``FlatSarsaAgent``): terminal

@@ -97,7 +97,12 @@ class TopLevel:
             return phi, decision
         # Value only what can be chosen: the primitives, and the few options whose initiation
         # set holds the state (each value is the same row sum as a full forward).
-        q = self.q_head.forward_mask(phi, available & rows[:, None], dense=self.num_primitives)
+        if self.closed_form:  # (a buffer: no graph; the hot path skips the context)
+            q = self.q_head.forward_mask(phi, available & rows[:, None], dense=self.num_primitives)
+        else:  # a head of the user's own: acting values are never differentiated
+            with torch.no_grad():
+                q = self.q_head.forward_mask(phi, available & rows[:, None],
+                                             dense=self.num_primitives)  # fmt: skip
         self.last_phi, self.last_q, self.last_available = phi, q, available
         return phi, epsilon_greedy(q, available, self.epsilon, uniforms,
                                    check=False)  # primitives are always available
