@@ -112,8 +112,8 @@ class EpisodeProtocol:
         """Nothing to write back: the state is held for all agents."""
 
     # ------------------------------------------------------------------ state
-    _EPISODE = ("obs", "contains", "decision", "option", "decision_return", "duration",
-                "active")
+    _EPISODE = ("obs", "contains", "own_contains", "decision", "option", "decision_return",
+                "duration", "active")
 
     def state_dict(self, *args, **kwargs):
         """Top-level weights, options, streams, and every agent's episode state.
@@ -146,8 +146,11 @@ class EpisodeProtocol:
         self._index = state["index"].to(device)
         self.action = state["action"].to(device).clone()
         self.decision_phi = state["phi"].to(device).clone()
+        episode = state["episode"]
+        if "own_contains" not in episode:  # saved before the own sets were kept (issue 30):
+            episode = {**episode, "own_contains": episode["contains"]}  # what it learned by
         for name in self._EPISODE:
-            setattr(self, name, state["episode"][name].to(device).clone())
+            setattr(self, name, episode[name].to(device).clone())
         phi, self.option_code = self._encode(self.obs)  # pure functions of s
         if self.intra_option_primitives:
             self.state_phi = phi

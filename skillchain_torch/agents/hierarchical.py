@@ -55,7 +55,13 @@ from skillchain_torch.agents.top_level import TopLevel, shared_fourier_columns
 from skillchain_torch.discovery.overlap import overlap_exclusion
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
-from skillchain_torch.objectives import IntraOptionQLearning, SarsaUpdate, SMDPSarsaLoss, discount
+from skillchain_torch.objectives import (
+    IntraOptionQLearning,
+    SarsaUpdate,
+    SMDPSarsaLoss,
+    discount,
+    option_update_mask,
+)
 from skillchain_torch.options import (
     GoalEvent,
     InitiationClassifier,
@@ -213,6 +219,9 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
         self.obs = torch.zeros(P, self.obs_dim, **f64)  # current s
         self.option_code = bank.q_head.encode(self.obs)  # the option heads' code of s
         self.contains = torch.zeros(P, self.slots, dtype=torch.bool, device=device)  # s in I_k
+        # s in option k's own set (the classifier's, before any no-overlap narrowing): where
+        # option k learns off-policy (objectives.option_update_mask)
+        self.own_contains = self.contains.clone()
         self.decision_phi = torch.zeros(P, num_features, **f64)  # phi(s_decision)
         # phi(s) of the current state, kept only for intra_option_primitives (its updates
         # are at s, which need not be where the decision in force was taken).
@@ -237,8 +246,8 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
 
     # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
     # parameters, buffers and submodules) costs more than the tensor maths for these.
-    _PLAIN = frozenset({"obs", "contains", "decision_phi", "decision", "option", "action",
-                        "decision_return", "duration", "active", "option_code", "last_q",
+    _PLAIN = frozenset({"obs", "contains", "own_contains", "decision_phi", "decision", "option",
+                        "action", "decision_return", "duration", "active", "option_code", "last_q",
                         "last_phi", "last_value", "_index", "_raw_contains", "state_phi",
                         "last_available"})  # fmt: skip
     # The compiled transition also returns Q(s', d) of the decision in force (last_value).
@@ -272,6 +281,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
         if self.intra_option_primitives:
             self.state_phi = self.state_phi.index_copy(0, index, phi_rows)
         self.contains = torch.where(rows[:, None], contains, self.contains)
+        self.own_contains = torch.where(rows[:, None], self._raw_contains, self.own_contains)
         self._new_decisions(rows, phi_rows, decision, index=index)
         self._act(rows, u[:, 2:])
 
@@ -314,21 +324,24 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
         if not self.all_stepped(stepped):  # (with every agent stepped the masks change nothing)
             terminated, truncated = terminated & stepped, truncated & stepped
             next_obs = torch.where(stepped[:, None], next_obs, self.obs)
+        # The options that learn from s: the executing one, and those whose own sets hold s.
+        learn = option_update_mask(self.own_contains, self.option,
+                                   self.bank.live() & stepped[:, None])  # fmt: skip
         contains_next = self.membership(next_obs)
         reached = self.targets(next_obs, terminated, contains_next)
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
+        self.own_contains = torch.where(stepped[:, None], self._raw_contains, self.own_contains)
         if self.native:  # the rest in one compiled pass
             return _native.transition(self, next_obs, reward, terminated, truncated, stepped,
-                                      contains_next, reached, u)  # fmt: skip
+                                      contains_next, reached, u, learn)  # fmt: skip
         bank = self.bank
         ended = terminated | truncated
         reward = torch.where(stepped, reward, torch.zeros_like(reward))
-        # Intra-option Q-learning: every live option whose initiation set holds s.
+        # Intra-option Q-learning (on-policy and off-policy, objectives.option_update_mask)
         phi_next, next_code = self._encode(next_obs)
         option_delta = self.option_update(
-            bank.q_head, self.obs, self.action, reward, next_obs, terminated, self.contains,
-            reached, learnable=bank.live() & stepped[:, None], code=self.option_code,
-            next_code=next_code,
+            bank.q_head, self.obs, self.action, reward, next_obs, terminated, learn, reached,
+            code=self.option_code, next_code=next_code,
         )
         # The decision in force accumulates the (discounted) reward.
         if self.gamma == 1.0:  # gamma^k = 1 exactly: skip the power

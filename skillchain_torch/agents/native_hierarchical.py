@@ -126,14 +126,15 @@ def _own(agent, name: str) -> Tensor:
 
 def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
                stepped: Tensor, contains_next: Tensor, reached: Tensor,
-               uniforms: Tensor) -> dict[str, Tensor]:  # fmt: skip
+               uniforms: Tensor, learn: Tensor) -> dict[str, Tensor]:  # fmt: skip
     """The rest of ``agent.transition`` after the memberships, targets and uniforms
     (``[P, 4]``) of ``s'``: its features, then every row in one C pass (weights updated in
     place, the state at ``s'`` in fresh tensors but for ``option_code`` and ``decision_phi``,
     updated in place). Returns the transition's monitoring dict.
 
     ``next_obs`` holds ``s`` on rows not stepped; ``terminated``/``truncated`` are masked to
-    ``stepped``; ``reward`` is float64.
+    ``stepped``; ``reward`` is float64; ``learn [P, K]``: the option slots this transition
+    updates (:func:`~skillchain_torch.objectives.option_update_mask`).
     """
     bank, head = agent.bank, agent.q_head
     P, D, F = head.weight.shape
@@ -142,7 +143,7 @@ def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, trun
     # The option heads' code is picked from phi_next inside (shared_fourier_columns).
     columns = agent._code_columns
     next_code = bank.q_head.encode(next_obs) if columns is None else None
-    reward, reached = reward.contiguous(), reached.contiguous()
+    reward, reached, learn = reward.contiguous(), reached.contiguous(), learn.contiguous()
     f64 = torch.float64
     # The two large state arrays are updated in place (see the C step); they are the agent's
     # own (every other writer replaces them), so nothing else sees the change. The [P]
@@ -174,7 +175,7 @@ def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, trun
             0 if value is None else value.data_ptr(),
             int(agent.failure_bootstrap == "primitives"),
             _own(agent, "state_phi").data_ptr() if agent.intra_option_primitives else 0,
-            int(agent.interruption))  # fmt: skip
+            int(agent.interruption), learn.data_ptr())  # fmt: skip
     info = {"decision_ended": decision_ended, "duration": info_duration,
             "decision_return": info_return, "option_delta": option_delta,
             "smdp_delta": smdp_delta, "decision": state["decision"], "option": state["option"],

@@ -2,8 +2,8 @@
 targets fired, and the executing option's action (paper sections 2 and 4).
 
 A mixin of :class:`~skillchain_torch.agents.HierarchicalAgent` (it reads ``bank``, ``events``,
-the no-overlap ``_exclusion`` and the per-step state); skill chaining overrides
-:meth:`membership` and :meth:`targets` with its own rules.
+the no-overlap ``_exclusion`` and the per-step state); skill chaining overrides :meth:`narrow`
+and :meth:`targets` with its own rules.
 
 Example:
     >>> from skillchain_torch.agents import HierarchicalAgent
@@ -30,10 +30,15 @@ class OptionExecution:
     """Memberships, targets and the executing option's action."""
 
     def membership(self, obs: Tensor) -> Tensor:
-        """``[P, K]``: which initiation sets hold ``obs [P, 4]`` (one classifier evaluation per
-        visited state; skill chaining narrows it by its overlap rule)."""
-        contains = self.bank.classifier.contains(obs)
-        self._raw_contains = contains  # the classifiers' own sets: the targets of chained options
+        """``[P, K]``: which initiation sets hold ``obs [P, 4]`` for *choosing* an option (one
+        classifier evaluation per visited state). The classifiers' own sets are kept as
+        ``_raw_contains``: the targets of chained options, and where options learn."""
+        self._raw_contains = self.bank.classifier.contains(obs)
+        return self.narrow(self._raw_contains)
+
+    def narrow(self, contains: Tensor) -> Tensor:
+        """The sets an option may be chosen in, from the classifiers' own ``contains [P, K]``
+        (skill chaining: its no-overlap rule, section 4.3)."""
         if self._exclusion is None:
             return contains
         return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)

@@ -14,7 +14,8 @@ reach it, growing chains and trees backwards from the goal.
 
 Compared with its parent class the agent:
 
-* narrows every membership query by the no-overlap rule (:meth:`membership`),
+* narrows every membership query by the no-overlap rule (:meth:`narrow`) for choosing only
+  (options learn in their own sets),
 * evaluates the base target events once per state and derives every option's target from them
   (:meth:`targets`),
 * records the states of each execution and, when it ends, adds initiation-set examples,
@@ -175,8 +176,8 @@ class SkillChainingAgent(HierarchicalAgent):
         return bank, {**arguments, **kwargs}
 
     # ------------------------------------------------------------------ hooks
-    def membership(self, obs: Tensor) -> Tensor:
-        return self.discovery.membership(self.bank.classifier.contains(obs))
+    def narrow(self, contains: Tensor) -> Tensor:
+        return self.discovery.membership(contains)
 
     def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
         # Targets are the classifiers' own sets at s' (kept by membership), not the effective
@@ -219,6 +220,8 @@ class SkillChainingAgent(HierarchicalAgent):
         if bool(created.any()):  # the new slot changes the memberships at s'
             self.contains = torch.where(created[:, None], self.membership(self.obs),
                                         self.contains)  # fmt: skip
+            self.own_contains = torch.where(created[:, None], self._raw_contains,
+                                            self.own_contains)  # fmt: skip
             self.discovery.created_rows_evaluated(created)
         # New decisions were valued before this step's update; an agent going on with its
         # option had no update this step, so its value now is the value then.

@@ -3,7 +3,11 @@
 (:class:`SMDPSarsaLoss`, :class:`IntraOptionQLoss`) for heads trained by an optimizer."""
 
 from skillchain_torch.objectives.intra_option_loss import IntraOptionQLoss
-from skillchain_torch.objectives.q_learning import IntraOptionQLearning, option_td_target
+from skillchain_torch.objectives.q_learning import (
+    IntraOptionQLearning,
+    option_td_target,
+    option_update_mask,
+)
 from skillchain_torch.objectives.sarsa import SarsaUpdate, discount, smdp_td_error
 from skillchain_torch.objectives.smdp_sarsa_loss import SMDPSarsaLoss
 
@@ -14,5 +18,6 @@ __all__ = [
     "SarsaUpdate",
     "discount",
     "option_td_target",
+    "option_update_mask",
     "smdp_td_error",
 ]

@@ -3,10 +3,11 @@
 :class:`~skillchain_torch.objectives.IntraOptionQLearning` steps the built-in Fourier option
 heads in closed form. :class:`IntraOptionQLoss` is the same rule as a loss over every option
 slot, so an option head of the user's own trains by any torch optimizer: for each ``(p, k)`` in
-``mask`` (the slots that learn from this transition), the target ``r + C T_k(s') + gamma
-max_a Q_k(s', a) (1 - (T_k(s') or terminated))`` (:func:`option_td_target`, held fixed) and the
-loss ``1/2 sum_{p,k in mask} (target - Q_k(s_p, a_p))^2``. Summed, not averaged, so plain SGD at
-the head's ``alpha`` on a linear head is the closed-form step (tested to rounding).
+``mask`` (the slots that learn from this transition: :func:`~skillchain_torch.objectives.
+option_update_mask`), the target ``r + C T_k(s') + gamma max_a Q_k(s', a) (1 - (T_k(s') or
+terminated))`` (:func:`option_td_target`, held fixed) and the loss
+``1/2 sum_{p,k in mask} (target - Q_k(s_p, a_p))^2``. Summed, not averaged, so plain SGD at the
+head's ``alpha`` on a linear head is the closed-form step (tested to rounding).
 
 Example:
     >>> import torch

@@ -1,7 +1,18 @@
 """Intra-option Q-learning for every option slot (paper section 5.1: ``gamma = 1``).
 
 Every primitive transition ``(s, a, r, s')``, whoever chose ``a`` (the top level, another option,
-or the option itself), updates every option ``k`` whose initiation set contains ``s``:
+or the option itself), updates the options :func:`option_update_mask` names:
+
+* **on-policy**: the executing option, wherever ``s`` is. Section 5.1 ignores "off-policy
+  updates to an option for states outside its initiation set"; an execution's own steps are
+  on-policy, and one that strays out of its set (or its 0.1 tube) must still learn there, or
+  its in-set targets bootstrap from values nothing trains;
+* **off-policy**: every other option whose own initiation set (the classifier's) holds ``s``.
+  The no-overlap rule of section 4.3 narrows sets for *choosing* an option only: a younger
+  sibling still learns inside its elder's region, which it may cross on its way to their
+  common target.
+
+Each updated option ``k`` moves toward
 
     target_k = r + C * T_k(s') + gamma * max_a' Q_k(s', a') * (1 - (T_k(s') or terminated))
     delta_k  = target_k - Q_k(s, a)
@@ -21,6 +32,8 @@ Example:
     ...        in_initiation=torch.tensor([[True, False]]),
     ...        target_reached=torch.tensor([[True, True]])).tolist()
     [[99.0, 0.0]]
+    >>> option_update_mask(torch.tensor([[True, False, False]]), torch.tensor([2])).tolist()
+    [[True, False, True]]
 """
 
 from __future__ import annotations
@@ -30,6 +43,26 @@ from torch import Tensor, nn
 
 from skillchain_torch.options.q_head import OptionQHead
 from skillchain_torch.options.status import check_slot_mask
+
+__all__ = ["IntraOptionQLearning", "option_td_target", "option_update_mask"]
+
+
+def option_update_mask(in_initiation: Tensor, executing: Tensor | None = None,
+                       learnable: Tensor | None = None) -> Tensor:
+    """``BoolTensor [P, K]``: the option slots a transition from ``s`` updates (module docstring).
+
+    Args:
+        in_initiation: ``[P, K]`` ``s`` lies in option k's own initiation set (the classifier's,
+            not narrowed by the no-overlap rule): off-policy updates.
+        executing: ``LongTensor [P]`` the slot that chose the action at ``s``, ``-1`` for
+            none: its on-policy update, wherever ``s`` is. ``None``: no option executing.
+        learnable: ``[P, K]`` slots that may learn at all (live, and stepped), default all.
+    """
+    mask = in_initiation
+    if executing is not None:
+        slots = torch.arange(mask.shape[1], device=mask.device)
+        mask = mask | (slots[None, :] == executing.reshape(-1, 1).to(mask.device))
+    return mask if learnable is None else mask & learnable
 
 
 def option_td_target(
@@ -103,8 +136,9 @@ class IntraOptionQLearning(nn.Module):
         learnable: Tensor | None = None,
         code: Tensor | None = None,
         next_code: Tensor | None = None,
+        executing: Tensor | None = None,
     ) -> Tensor:
-        """Update every ``(p, k)`` with ``learnable & in_initiation``; return ``delta [P, K]``.
+        """Update the ``(p, k)`` of :func:`option_update_mask`; return ``delta [P, K]``.
 
         Args:
             q_head: any :class:`~skillchain_torch.options.OptionQHead` (``[P, K, A]`` values).
@@ -113,13 +147,15 @@ class IntraOptionQLearning(nn.Module):
             reward: ``[P]`` or ``[P, 1]``.
             env_terminated: ``BoolTensor [P]`` or ``[P, 1]``; a truncated episode is *not*
                 terminated and bootstraps.
-            in_initiation: ``BoolTensor [P, K]``, ``s`` lies in option k's initiation set;
-                updates from outside it are ignored (paper 5.1).
+            in_initiation: ``BoolTensor [P, K]``, ``s`` lies in option k's own initiation
+                set; off-policy updates from outside it are ignored (paper 5.1).
             target_reached: ``BoolTensor [P, K]``, option k's termination predicate at ``s'``.
             learnable: ``BoolTensor [P, K]`` live slots (default all).
             code, next_code: ``q_head.encode`` of ``obs`` and ``next_obs`` when the caller
                 already has them (an agent encodes each state once); then ``obs`` and
                 ``next_obs`` are not read.
+            executing: ``LongTensor [P]``, the slot that chose ``action`` (``-1``: none); it
+                learns on-policy wherever ``s`` is.
 
         Returns:
             the TD errors, 0 where nothing was updated.
@@ -127,9 +163,11 @@ class IntraOptionQLearning(nn.Module):
         population, slots = q_head.population, q_head.slots
         in_initiation = check_slot_mask(in_initiation, population, slots, "in_initiation")
         target_reached = check_slot_mask(target_reached, population, slots, "target_reached")
-        mask = in_initiation
         if learnable is not None:
-            mask = mask & check_slot_mask(learnable, population, slots, "learnable")
+            learnable = check_slot_mask(learnable, population, slots, "learnable")
+        if executing is not None and executing.numel() != population:
+            raise ValueError(f"executing must be [P={population}], got {tuple(executing.shape)}")
+        mask = option_update_mask(in_initiation, executing, learnable)
         for name, value in (("reward", reward), ("env_terminated", env_terminated)):
             if value.numel() != population:
                 raise ValueError(f"{name} must be [P={population}], got {tuple(value.shape)}")
