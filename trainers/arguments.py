@@ -191,10 +191,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--policy-start",
-        choices=("zero", "top-level"),
+        choices=("zero", "top-level", "top-level-shifted"),
         default=None,
         help="how a new option's policy starts when it joins: zero weights updated off-policy "
-        "in gestation, or the agent's own primitive values projected onto the option's basis"
+        "in gestation, or the agent's own primitive values projected onto the option's basis "
+        "(top-level-shifted: that copy plus completion reward minus the top level's value of "
+        "the target, so the option's values and its own targets are on one scale)"
         + _presets("policy_start"),
     )
     train.add_argument(

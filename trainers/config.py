@@ -144,7 +144,8 @@ class TrainConfig:
             InitiationClassifier`).
         policy_start: (preset) how a joining option's policy starts (``"zero"``: gestation's
             updates of zero weights; ``"top-level"``: the agent's own primitive values
-            projected onto the option's basis; see :class:`~skillchain_torch.discovery.
+            projected onto the option's basis; ``"top-level-shifted"``: that copy on the
+            option's own scale; see :class:`~skillchain_torch.discovery.
             SkillChaining`).
         option_alpha: (preset) the options' Q-learning step size (paper: ``alpha_o =
             0.0005``); given options keep the step size of the run that discovered them.

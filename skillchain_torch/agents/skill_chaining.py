@@ -69,7 +69,8 @@ class SkillChainingAgent(HierarchicalAgent):
             the paper's discovery rules; :meth:`build` takes every value from a preset.
         reading: the initiation-set reading (:class:`~skillchain_torch.discovery.
             InitiationReading`; default the first one, true everywhere until the first fit).
-        policy_start: ``"zero"`` or ``"top-level"``: how a joining option's policy starts
+        policy_start: ``"zero"``, ``"top-level"`` or ``"top-level-shifted"``: how a joining
+            option's policy starts
             (see :class:`~skillchain_torch.discovery.SkillChaining`).
         **kwargs: the :class:`HierarchicalAgent` arguments (``order``, ``alpha``, ``gamma``,
             ``epsilon``, ``seed``, ``option_epsilon``, ``max_option_steps``, ...).
@@ -92,7 +93,7 @@ class SkillChainingAgent(HierarchicalAgent):
         super().__init__(bank, events=events, **kwargs)
         # Two starts read the linear head's weights and the Fourier basis directly.
         uses = [f"value_start={value_start!r}"] * (value_start == "agent") + \
-            [f"policy_start={policy_start!r}"] * (policy_start == "top-level")
+            [f"policy_start={policy_start!r}"] * (policy_start != "zero")
         if uses and not (self.closed_form and type(self.features) is FourierBasis):
             raise ValueError(f"{' and '.join(uses)} fit the built-in LinearQHead over a "
                              f"FourierBasis, not {type(self.q_head).__name__} over "
@@ -105,7 +106,7 @@ class SkillChainingAgent(HierarchicalAgent):
             max_option_steps=kwargs.get("max_option_steps", MAX_OPTION_STEPS), overlap=overlap,
             wait_for_both_classes=wait_for_both_classes, reading=reading,
             policy_start=policy_start, value_start=value_start, value_bonus=value_bonus,
-            top_basis=self.features,
+            top_basis=self.features, completion_reward=self.option_update.completion_reward,
         )  # fmt: skip
         # Q(s, d) of the decision d in force at the current state s, valued when s was reached
         # (before that step's update): the samples of gestation.

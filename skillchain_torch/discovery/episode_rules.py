@@ -31,6 +31,7 @@ from .gestation import (
     initialise_option_values,
     state_value_fit,
 )
+from .value_scale import shift_option_values, target_levels
 
 __all__ = ["EpisodeRules"]
 
@@ -60,11 +61,14 @@ class EpisodeRules:
             initialise_option_values(q_head, join, value, q_head.num_decisions - bank.slots)
             if self.value_start == "agent":
                 self._agent_values(q_head, join)
-            if self.policy_start == "top-level":
+            if self.policy_start != "zero":  # a copy of the top level's primitive values
                 if self._projection is None:  # once per run: a fixed grid, no random numbers
                     self._projection = cached_projection(self.top_basis, bank.q_head.basis)
                 initialise_option_policies(bank.q_head, q_head, join, self._projection,
                                            bank.num_actions)  # fmt: skip
+            if self.policy_start == "top-level-shifted":  # ... on the option's own scale
+                level = target_levels(bank, q_head, self.top_basis, join)
+                shift_option_values(bank.q_head, join, self.completion_reward - level)
             for p, k in join.nonzero().tolist():
                 self._emit("joined", p, k, target=self.target_name(p, k),
                            value=float(value[p, k]))  # fmt: skip

@@ -58,8 +58,9 @@ GESTATION_EPISODES = 10
 NUM_PRIMITIVES = 5
 # How an option's policy starts when it joins: "zero" (the paper is silent; whatever gestation's
 # off-policy updates made of zero weights) or "top-level" (the agent's own primitive values
-# projected onto the option's basis, as deep skill chaining copies the global agent's weights).
-POLICY_STARTS = ("zero", "top-level")
+# projected onto the option's basis, as deep skill chaining copies the global agent's weights),
+# or "top-level-shifted" (that copy moved onto the option's own scale: discovery/value_scale.py).
+POLICY_STARTS = ("zero", "top-level", "top-level-shifted")
 # How Q(s, o) starts when the option joins: "max-sample" (the paper: the best Q(s, d) sampled
 # when the target fired in gestation, everywhere) or "agent" (the agent's own state value
 # max_a Q(s, a) over the primitives, fitted in its basis, plus ``value_bonus``).

@@ -110,8 +110,10 @@ class SkillChaining(StepRules, EpisodeRules):
             ``"zero"`` keeps what gestation's off-policy updates made of zero weights (the
             paper is silent); ``"top-level"`` sets it to the agent's own primitive values
             projected onto the option's basis (:func:`~.gestation.initialise_option_policies`),
-            as deep skill chaining starts options from the global agent. Needs ``top_basis``
-            and a Fourier option head.
+            as deep skill chaining starts options from the global agent;
+            ``"top-level-shifted"`` moves that copy onto the option's own scale (its target
+            worth ``completion_reward``, :mod:`~.value_scale`). Both need ``top_basis`` and a
+            Fourier option head.
         value_start: how ``Q(s, o)`` starts when the option joins
             (:data:`~.gestation.VALUE_STARTS`): ``"max-sample"`` (the paper: the best value
             sampled when its target fired in gestation, everywhere) or ``"agent"`` (the agent's
@@ -136,6 +138,7 @@ class SkillChaining(StepRules, EpisodeRules):
         value_start: str = "max-sample",
         value_bonus: float = 0.0,
         top_basis=None,
+        completion_reward: float = 10_000.0,
     ):
         if value_start not in VALUE_STARTS:
             raise ValueError(f"value_start must be one of {', '.join(VALUE_STARTS)}, "
@@ -147,11 +150,12 @@ class SkillChaining(StepRules, EpisodeRules):
         if policy_start not in POLICY_STARTS:
             raise ValueError(f"policy_start must be one of {', '.join(POLICY_STARTS)}, "
                              f"got {policy_start!r}")  # fmt: skip
-        if policy_start == "top-level" and (top_basis is None
-                                            or getattr(bank.q_head, "basis", None) is None):
-            raise ValueError("policy_start 'top-level' needs the agent's Fourier basis "
+        if policy_start != "zero" and (top_basis is None
+                                       or getattr(bank.q_head, "basis", None) is None):
+            raise ValueError(f"policy_start {policy_start!r} needs the agent's Fourier basis "
                              "(top_basis) and a Fourier option head (FourierOptionQHead)")
         self.policy_start, self.top_basis = policy_start, top_basis
+        self.completion_reward = float(completion_reward)
         self._projection: Tensor | None = None
         if gestation < 0 or max_branching < 1 or max_option_steps < 1:
             raise ValueError("need gestation >= 0, max_branching >= 1, max_option_steps >= 1")
