@@ -2,8 +2,10 @@
 
 :class:`DiscoveryLog` is a trainer hook for agents with a ``discovery``
 (:class:`~skillchain_torch.discovery.SkillChaining`). At every episode end it records how many
-options the agent holds (``n_options [P, E]``, written as ``DIR/n_options.npy``) and drains the
-discovery events. To TensorBoard (through the run's TorchRL logger) it writes:
+options the agent holds (``n_options [P, E]``, written as ``DIR/n_options.npy``) and how its
+option executions ended (``outcomes [P, E, 3]``: successes, timeouts, episode ends; written as
+``DIR/option_outcomes.npy``), and drains the discovery events. To TensorBoard (through the
+run's TorchRL logger) it writes:
 
 * ``discovery/events`` (text): every creation, end of gestation, learned set and full agent;
 * ``agent_{p}/options``, per agent-episode; when the slowest agent completes an episode:
@@ -11,6 +13,8 @@ discovery events. To TensorBoard (through the run's TorchRL logger) it writes:
   and ``_max`` (the deepest option of each agent: 1 targets the goal, 2 targets a depth-1
   option's set, ...), ``discovery/created``, ``discovery/learned`` (totals over agents so far)
   and ``discovery/agents_slots_full``;
+* ``discovery/success_rate``, ``discovery/timeout_rate`` (of the executions ended in the
+  population episode, all agents and options);
 * ``discovery/learned/agent_{p}/slot_{k}`` (image): the Figure-5 density of each option's
   initiation set when it is learned (for the agents in ``image_agents``).
 
@@ -34,6 +38,7 @@ from collections import Counter
 import numpy as np
 import torch
 
+from skillchain_torch.discovery.executions import OUTCOMES
 from skillchain_torch.options import OptionStatus
 
 from .timed import TimedHook
@@ -77,6 +82,7 @@ class DiscoveryLog(TimedHook):
         self.image_agents = tuple(int(p) for p in image_agents)
         self.image_resolution = int(image_resolution)
         self.n_options: np.ndarray | None = None
+        self.outcomes: np.ndarray | None = None
         self.totals: Counter = Counter()
         self._map = None
         self.seconds = 0.0  # wall time in the hooks (recorded in run_info.json)
@@ -87,6 +93,8 @@ class DiscoveryLog(TimedHook):
         P, E = trainer.config.runs, trainer.config.episodes
         if self.n_options is None:
             self.n_options = np.full((P, E), -1, dtype=np.int64)
+        if self.outcomes is None:
+            self.outcomes = np.zeros((P, E, len(OUTCOMES)), dtype=np.int64)
         self._map = getattr(trainer.env, "pinball_map", None)
         trainer.register_op("post_episodes", self.post_episodes, name=name)
         trainer.register_op("post_train", self.post_train, name=name)
@@ -96,6 +104,10 @@ class DiscoveryLog(TimedHook):
         agent = trainer.agent
         live = agent.bank.live().sum(-1).cpu().numpy()
         self.n_options[batch.agents, batch.episodes] = live[batch.agents]
+        rows = torch.as_tensor(batch.agents, dtype=torch.int64)
+        counts = agent.discovery.outcomes[rows.to(agent.discovery.outcomes.device)]
+        self.outcomes[batch.agents, batch.episodes] = counts.cpu().numpy()
+        agent.discovery.outcomes[rows] = 0
         events = agent.discovery.drain()
         self.totals.update(e.kind for e in events)
         if self.logger is None:
@@ -123,6 +135,10 @@ class DiscoveryLog(TimedHook):
             log(f"discovery/{kind}", float(self.totals[kind]), step=episode)
         full = float(agent.discovery.slots_full_logged.sum())
         log("discovery/agents_slots_full", full, step=episode)
+        ended = self.outcomes[:, episode - 1].sum(0)
+        if ended.sum() > 0:
+            log("discovery/success_rate", float(ended[0] / ended.sum()), step=episode)
+            log("discovery/timeout_rate", float(ended[1] / ended.sum()), step=episode)
 
     def _image(self, agent, event) -> None:
         from .initiation_images import initiation_density, initiation_image
@@ -138,10 +154,12 @@ class DiscoveryLog(TimedHook):
 
     def state_dict(self) -> dict:
         return {"n_options": torch.from_numpy(self.n_options.copy()),
-                "totals": dict(self.totals)}
+                "outcomes": torch.from_numpy(self.outcomes.copy()), "totals": dict(self.totals)}
 
     def load_state_dict(self, state: dict) -> None:
         self.n_options = state["n_options"].numpy().copy()
+        if "outcomes" in state:  # (not in checkpoints saved before the counts were kept)
+            self.outcomes = state["outcomes"].numpy().copy()
         self.totals = Counter(state["totals"])
 
 

@@ -209,6 +209,7 @@ def run_block(config: TrainConfig, block_dir: str | Path, threads: int = 1,
 
         trainer.agent.bank.save(block_dir / "options.pt")
         np.save(block_dir / "n_options.npy", discovery.n_options)
+        np.save(block_dir / "option_outcomes.npy", discovery.outcomes)
         (block_dir / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent)) + "\n")
     record = {"agents": config.runs, "seed": config.seed, "agent_steps": int(trainer.agent_steps),
               "wall_time_s": trainer.elapsed,
@@ -420,6 +421,9 @@ def _merge_options(run: ShardedRun, dirs: list[Path]) -> np.ndarray:
         run.out / "options.pt")
     n_options = np.concatenate([np.load(d / "n_options.npy") for d in dirs])
     np.save(run.out / "n_options.npy", n_options)
+    if all((d / "option_outcomes.npy").exists() for d in dirs):  # (blocks of older runs lack it)
+        np.save(run.out / "option_outcomes.npy",
+                np.concatenate([np.load(d / "option_outcomes.npy") for d in dirs]))
     trees = [json.loads((d / "option_tree.json").read_text()) for d in dirs]
     agents = [{**agent, "agent": a + agent["agent"]}
               for (a, _), tree in zip(run.spans, trees) for agent in tree["agents"]]

@@ -29,6 +29,7 @@ OUTPUTS = (
     "checkpoints",
     "options.pt",
     "n_options.npy",
+    "option_outcomes.npy",
     "option_tree.json",
     "option_trajectory.png",
     "diverged.json",  # a diverged run's returns so far (PopulationTrainer.DIVERGED_OUTPUTS)
@@ -159,13 +160,15 @@ def _read_commit() -> str | None:
 
 
 def write_discovery(trainer, discovery, out: Path) -> None:
-    """``options.pt`` (every agent's bank), ``n_options.npy`` and ``option_tree.json``."""
+    """``options.pt`` (every agent's bank), ``n_options.npy``, ``option_outcomes.npy`` and
+    ``option_tree.json``."""
     import numpy as np
 
     from .discovery_log import option_tree
 
     trainer.agent.bank.save(out / "options.pt")
     np.save(out / "n_options.npy", discovery.n_options)
+    np.save(out / "option_outcomes.npy", discovery.outcomes)
     (out / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent), indent=1) + "\n")
     if trainer.config.env is not None:  # Figure 4b off Pinball: observation dims 0 and 1
         from .env_trajectory import best_env_trajectory, save_env_trajectory

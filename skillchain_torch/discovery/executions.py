@@ -35,7 +35,12 @@ from torch import Tensor
 from skillchain_torch.discovery import native_discovery
 from skillchain_torch.options import InitiationClassifier, OptionQHead, native_initiation
 
-__all__ = ["execution_outcome", "ExecutionTrace"]
+__all__ = ["OUTCOMES", "execution_outcome", "ExecutionTrace"]
+
+# How an execution ends, as counted per agent-episode (SkillChaining.outcomes, the run's
+# option_outcomes.npy): its target fired; it ran max_steps; the episode terminated elsewhere.
+# (An execution cut by a truncated episode is neither success nor failure and is not counted.)
+OUTCOMES = ("success", "timeout", "episode_end")
 
 OBS_DIM = 4
 
