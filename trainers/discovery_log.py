@@ -104,10 +104,8 @@ class DiscoveryLog(TimedHook):
         agent = trainer.agent
         live = agent.bank.live().sum(-1).cpu().numpy()
         self.n_options[batch.agents, batch.episodes] = live[batch.agents]
-        rows = torch.as_tensor(batch.agents, dtype=torch.int64)
-        counts = agent.discovery.outcomes[rows.to(agent.discovery.outcomes.device)]
-        self.outcomes[batch.agents, batch.episodes] = counts.cpu().numpy()
-        agent.discovery.outcomes[rows] = 0
+        last = agent.discovery.counts.last_outcomes.sum(1).cpu().numpy()  # [P, 3]
+        self.outcomes[batch.agents, batch.episodes] = last[batch.agents]
         events = agent.discovery.drain()
         self.totals.update(e.kind for e in events)
         if self.logger is None:

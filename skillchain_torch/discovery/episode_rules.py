@@ -72,6 +72,7 @@ class EpisodeRules:
             for p, k in join.nonzero().tolist():
                 self._emit("joined", p, k, target=self.target_name(p, k),
                            value=float(value[p, k]))  # fmt: skip
+        self.counts.end_episodes(rows)
         self.episode = self.episode + rows.to(torch.int64)
         self.episode_weights = torch.where(rows[:, None, None], classifier.snapshot(),
                                            self.episode_weights)  # fmt: skip

@@ -35,11 +35,12 @@ from torch import Tensor
 from skillchain_torch.discovery import native_discovery
 from skillchain_torch.options import InitiationClassifier, OptionQHead, native_initiation
 
-__all__ = ["OUTCOMES", "execution_outcome", "ExecutionTrace"]
+__all__ = ["OUTCOMES", "ExecutionCounts", "execution_outcome", "ExecutionTrace"]
 
-# How an execution ends, as counted per agent-episode (SkillChaining.outcomes, the run's
+# How an execution ends, as counted per agent-episode (ExecutionCounts, the run's
 # option_outcomes.npy): its target fired; it ran max_steps; the episode terminated elsewhere.
-# (An execution cut by a truncated episode is neither success nor failure and is not counted.)
+# (An execution cut by a truncated episode is neither success nor failure: its steps count,
+# its outcome does not.)
 OUTCOMES = ("success", "timeout", "episode_end")
 
 OBS_DIM = 4
@@ -154,3 +155,59 @@ class ExecutionTrace:
         device = self.states.device
         self.states = state["states"].to(device).clone()
         self.snapshot = {k: v.to(device).clone() for k, v in state["snapshot"].items()}
+
+
+class ExecutionCounts:
+    """How each agent's option executions ended this episode, per slot: ``outcomes [P, K, 3]``
+    (:data:`OUTCOMES`) and ``steps [P, K]`` (their durations). At an agent's episode end they
+    become its ``last_outcomes`` / ``last_steps`` (what the trainer's monitors read) and start
+    again. Kept by discovery, where executions end anyway, so monitoring needs no per-step work.
+
+    Example:
+        >>> counts = ExecutionCounts(population=2, slots=2)
+        >>> counts.add(torch.tensor([True, False]), torch.tensor([1, 0]),
+        ...            torch.tensor([True, False]), torch.tensor([False, False]),
+        ...            torch.tensor([False, False]), torch.tensor([12, 3]))
+        >>> counts.end_episodes(torch.tensor([True, True]))
+        >>> counts.last_outcomes[0, 1].tolist(), counts.last_steps.tolist()
+        ([1, 0, 0], [[0, 12], [0, 0]])
+        >>> int(counts.steps.sum())  # the new episodes' counts start at 0
+        0
+    """
+
+    def __init__(self, population: int, slots: int, device=None):
+        i64 = dict(dtype=torch.int64, device=device)
+        self.outcomes = torch.zeros(population, slots, len(OUTCOMES), **i64)
+        self.steps = torch.zeros(population, slots, **i64)
+        self.last_outcomes, self.last_steps = self.outcomes.clone(), self.steps.clone()
+
+    def add(self, done: Tensor, slot: Tensor, success: Tensor, timeout: Tensor,
+            episode_end: Tensor, duration: Tensor) -> None:  # fmt: skip
+        """Rows ``done [P]`` ended an execution of ``slot [P]`` after ``duration [P]`` steps,
+        with the outcome flags given (all ``[P]``; none set: a truncated episode)."""
+        rows = done.nonzero()[:, 0]
+        if rows.numel() == 0:
+            return
+        k = slot[rows]
+        kinds = torch.stack([success, timeout, episode_end], 1)[rows].to(torch.int64)
+        self.outcomes[rows, k] += kinds
+        self.steps[rows, k] += duration[rows].to(torch.int64)
+
+    def end_episodes(self, rows: Tensor) -> None:
+        """Agents ``rows [P]`` ended an episode: their counts become the last episode's."""
+        keep = rows[:, None]
+        self.last_steps = torch.where(keep, self.steps, self.last_steps)
+        self.last_outcomes = torch.where(keep[..., None], self.outcomes, self.last_outcomes)
+        self.steps = torch.where(keep, torch.zeros_like(self.steps), self.steps)
+        self.outcomes = torch.where(keep[..., None], torch.zeros_like(self.outcomes),
+                                    self.outcomes)  # fmt: skip
+
+    _STATE = ("outcomes", "steps", "last_outcomes", "last_steps")
+
+    def state_dict(self) -> dict:
+        return {name: getattr(self, name).clone() for name in self._STATE}
+
+    def load_state_dict(self, state: dict) -> None:
+        device = self.steps.device
+        for name in self._STATE:
+            setattr(self, name, state[name].to(device).clone())

@@ -51,7 +51,7 @@ from . import native_discovery
 from .convergence import CONVERGENCE_EPISODES, CONVERGENCE_THRESHOLD, ConvergenceTest
 from .episode_rules import EpisodeRules
 from .events import MAX_BRANCHING, entered, evaluate_base_events, target_indicator
-from .executions import OUTCOMES, ExecutionTrace
+from .executions import ExecutionCounts, ExecutionTrace
 from .gestation import (
     GESTATION_EPISODES,
     POLICY_STARTS,
@@ -181,9 +181,8 @@ class SkillChaining(StepRules, EpisodeRules):
         self.fitted = torch.zeros(P, K, dtype=torch.bool, device=device)  # this episode
         self.episode_weights = bank.classifier.snapshot()  # at each agent's episode start
         self.slots_full_logged = torch.zeros(P, dtype=torch.bool, device=device)
-        # Executions ended in each agent's current episode, by outcome (OUTCOMES): read and
-        # reset by the trainer's DiscoveryLog at each episode end.
-        self.outcomes = torch.zeros(P, len(OUTCOMES), dtype=torch.int64, device=device)
+        # How executions ended, per agent-episode and slot (read by the trainer's monitors)
+        self.counts = ExecutionCounts(P, K, device=device)
         self.log: list[DiscoveryEvent] = []
         # The states each agent acted in this episode, for gestation positives (if any).
         n = reading.gestation_positives
@@ -337,24 +336,25 @@ class SkillChaining(StepRules, EpisodeRules):
 
     # ------------------------------------------------------------------ state
     _STATE = ("episode", "base_now", "raw_now", "gestation_q", "fitted", "episode_weights",
-              "slots_full_logged", "outcomes")
+              "slots_full_logged")
 
     def state_dict(self) -> dict:
         state = {name: getattr(self, name).clone() for name in self._STATE}
         state["convergence"] = self.convergence.state_dict()
         state["trace"] = self.trace.state_dict()
+        state["counts"] = self.counts.state_dict()
         if self.recent is not None:
             state["recent"] = self.recent.state_dict()
         return state
 
     def load_state_dict(self, state: dict) -> None:
         device = self.episode.device
-        if "outcomes" not in state:  # saved before the outcome counts were kept
-            state = {**state, "outcomes": torch.zeros_like(self.outcomes)}
         for name in self._STATE:
             setattr(self, name, state[name].to(device).clone())
         self.convergence.load_state_dict(state["convergence"])
         self.trace.load_state_dict(state["trace"])
+        if "counts" in state:  # (saved before the counts were kept: they start at 0)
+            self.counts.load_state_dict(state["counts"])
         if self.recent is not None:
             if "recent" not in state:
                 raise ValueError("the saved discovery state has no recent states: it was "

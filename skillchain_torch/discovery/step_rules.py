@@ -83,7 +83,8 @@ class StepRules:
             success, failure = success & ended, failure & ended
             any_failure = bool(failure.any())
         timeout = failure & (duration >= self.max_option_steps)
-        self.outcomes += torch.stack([success, timeout, failure & ~timeout], 1).to(torch.int64)
+        self.counts.add(ended & (option >= 0), slot, success, timeout, failure & ~timeout,
+                        duration)  # fmt: skip
         classifier = self.bank.classifier
         touched = self.trace.store_examples(classifier, slot, duration, success, failure)
         # Paper: 100 sweeps per new data point. Logistic regression on failures alone says

@@ -20,8 +20,13 @@ def test_outcomes_by_kind():
     terminated = torch.tensor([False, False, True, False])  # row 3: truncated
     discovery._finish_executions(option, reached, duration, ended, terminated)
     assert OUTCOMES == ("success", "timeout", "episode_end")
-    assert discovery.outcomes.tolist() == [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 0]]
+    counts = discovery.counts
+    assert counts.outcomes[:, 0].tolist() == [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 0]]
+    assert counts.steps[:, 0].tolist() == [7, 250, 30, 30]  # a truncated one's steps count
     state = discovery.state_dict()
-    discovery.outcomes.zero_()
+    counts.outcomes.zero_()
     discovery.load_state_dict(state)
-    assert int(discovery.outcomes.sum()) == 3
+    assert int(discovery.counts.outcomes.sum()) == 3
+    discovery.end_episodes(torch.tensor([True, False, False, False]), agent.q_head)
+    assert discovery.counts.last_outcomes[0, 0].tolist() == [1, 0, 0]
+    assert int(discovery.counts.outcomes[0].sum()) == 0 and int(counts.steps[1, 0]) == 250

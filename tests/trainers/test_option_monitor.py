@@ -28,7 +28,7 @@ from skillchain_torch.trainers.option_monitor import (
 X, Y, XD, X2, Y2 = 1, 2, 3, 5, 9
 
 
-@pytest.mark.parametrize("name", ["option_monitor", "initiation_images"])
+@pytest.mark.parametrize("name", ["option_monitor", "option_counts", "initiation_images"])
 def test_doctests(name):
     module = importlib.import_module(f"skillchain_torch.trainers.{name}")
     assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
@@ -260,3 +260,20 @@ def test_slot_memo_answers_as_a_fresh_call():
     for _ in range(2):
         assert torch.equal(memo.contains(user, 1, 0), user.contains_points(1, 0, memo.probe))
     assert memo.misses == 5
+
+
+def test_agent_kept_counts_agree_with_counting_every_step():
+    config = TrainConfig(agent="skill-chaining", map="pinball_box", runs=3, episodes=4, seed=0,
+                         max_episode_steps=100_000)  # no truncation: the two counts agree
+    trainer = PopulationTrainer(config)
+    monitors = [OptionMonitor(counting="step"), OptionMonitor(counting="agent")]
+    for i, monitor in enumerate(monitors):
+        monitor.register(trainer, name=f"options_{i}")
+    assert monitors[1]._kept is not None and "transition" in vars(trainer.agent)
+    trainer.train()
+    a, b = (m._totals for m in monitors)
+    assert a.keys() == b.keys() == set(range(4))
+    for e in a:
+        for name in a[e]:
+            np.testing.assert_array_equal(a[e][name], b[e][name], err_msg=f"{e} {name}")
+    assert sum(int(t["executions"].sum()) for t in a.values()) > 0

@@ -1,0 +1,120 @@
+"""Issue 30's option-learning study: each variant's returns against flat Sarsa's, per window of
+episodes, with 95% Welch intervals (Student's t quantile), options held, and how executions end.
+
+    python results/option-learning/compare.py screen     # seeds 0-19 (screening only)
+    python results/option-learning/compare.py confirm    # seeds 1000+ (the evidence)
+
+Reads ``<block>/<variant>/{returns,n_options,option_outcomes}.npy`` (``flat`` is the baseline)
+and writes ``<block>/tables.md`` and ``<block>/curves.png``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "gym"))
+from report import diff_ci, mean_ci  # noqa: E402  (Student-t intervals, shared with results/gym)
+
+WINDOWS = ((1, 10), (11, 25), (26, 50), (51, 100), (101, 150), (151, 200), (201, 250))
+
+
+def load(block: Path) -> dict[str, dict[str, np.ndarray]]:
+    runs = {}
+    for folder in sorted(p for p in block.iterdir() if (p / "returns.npy").exists()):
+        runs[folder.name] = {name: np.load(folder / f"{name}.npy") for name in
+                             ("returns", "n_options", "option_outcomes")
+                             if (folder / f"{name}.npy").exists()}  # fmt: skip
+    return runs
+
+
+def fmt(mean: float, half: float) -> str:
+    return f"{mean:+,.0f} ± {half:,.0f}"
+
+
+def tables(runs: dict) -> list[str]:
+    flat = runs.get("flat")
+    episodes = min(r["returns"].shape[1] for r in runs.values())
+    windows = [(a, b) for a, b in WINDOWS if b <= episodes]
+    names = [n for n in runs if n != "flat"]
+    lines = ["## Mean return per window (95% t interval over runs)", "",
+             "| variant | runs | " + " | ".join(f"{a}-{b}" for a, b in windows) + " |",
+             "|---|---|" + "---|" * len(windows)]  # fmt: skip
+    for name, r in runs.items():
+        cells = [fmt(*mean_ci(r["returns"][:, a - 1:b].mean(1))) for a, b in windows]
+        lines.append(f"| {name} | {len(r['returns'])} | " + " | ".join(cells) + " |")
+    if flat is not None:
+        lines += ["", "## Variant - flat (95% Welch interval)", "",
+                  "| variant | " + " | ".join(f"{a}-{b}" for a, b in windows) + " |",
+                  "|---|" + "---|" * len(windows)]  # fmt: skip
+        for name in names:
+            cells = []
+            for a, b in windows:
+                d, h = diff_ci(runs[name]["returns"][:, a - 1:b].mean(1),
+                               flat["returns"][:, a - 1:b].mean(1))  # fmt: skip
+                star = "**" if abs(d) > h else ""
+                cells.append(f"{star}{fmt(d, h)}{star}")
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += ["", "## Options held, and how executions ended (all runs' executions in the "
+              "window)", "", "| variant | options at 25 / 50 / 250 | max options | "
+              + " | ".join(f"success / timeout {a}-{b}" for a, b in windows[2:4] + windows[-1:])
+              + " |", "|---|---|---|" + "---|" * 3]  # fmt: skip
+    for name in names:
+        r = runs[name]
+        n = r.get("n_options")
+        held, most = "-", "-"
+        if n is not None:
+            held = " / ".join(f"{n[:, e - 1].mean():.1f}" for e in (25, 50, episodes))
+            most = f"{int(n.max())}"
+        cells = []
+        for a, b in windows[2:4] + windows[-1:]:
+            o = r.get("option_outcomes")
+            if o is None:
+                cells.append("-")
+                continue
+            total = o[:, a - 1:b].sum((0, 1))
+            ended = total.sum()
+            cells.append(f"{total[0] / ended:.2f} / {total[1] / ended:.2f} (n={ended:,})"
+                         if ended else "no executions")
+        lines.append(f"| {name} | {held} | {most} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def figure(runs: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for name, r in runs.items():
+        x = r["returns"]
+        kernel = np.ones(10) / 10  # a 10-episode moving average, per run
+        smooth = np.array([np.convolve(row, kernel, mode="valid") for row in x])
+        m = smooth.mean(0)
+        h = 1.96 * smooth.std(0, ddof=1) / np.sqrt(len(smooth))
+        e = np.arange(10, x.shape[1] + 1)
+        ax.plot(e, m, label=f"{name} ({len(x)} runs)")
+        ax.fill_between(e, m - h, m + h, alpha=0.2)
+    ax.set_xlabel("episode")
+    ax.set_ylabel("return (10-episode moving average)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main() -> None:
+    block = HERE / (sys.argv[1] if len(sys.argv) > 1 else "screen")
+    runs = load(block)
+    lines = [f"# Option-learning study: {block.name}", "", *tables(runs), ""]
+    (block / "tables.md").write_text("\n".join(lines))
+    figure(runs, block / "curves.png")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
