@@ -212,8 +212,8 @@ def write_report(out: str | Path, names: list[str] | None = None, quiet: bool = 
             instance, agent = name.split("/")
             by_instance.setdefault(instance, {})[agent] = _load(out / name)
     md = ["# Skill chaining on Pinball: the paper's experiments", "",
-          "Written by `skillchain reproduce paper` (`skillchain_torch.trainers.reproduce`). Mean "
-          "return over runs of each run's window mean ± a 95% interval; differences with a "
+          "Written by `skillchain reproduce paper` (`skillchain_torch.trainers.study.reproduce`). "
+          "Mean return over runs of each run's window mean ± a 95% interval; differences with a "
           "Welch 95% interval (`*`: the interval excludes 0).", ""]  # fmt: skip
     report = {}
     for instance, runs in by_instance.items():

@@ -7,11 +7,12 @@ top-level keys: ``out``, ``workers``, ``block_size``; optional ``[summary] windo
 inclusive episode windows of the table (default: the first and last tenth of the episodes).
 
 Each cell is a normal run directory, ``OUT/<cell>/`` (named by its grid values), trained as a
-sharded run (:mod:`.distributed`): the blocks of every cell share one Ray pool, so the
-workers stay busy across cells. A re-run skips complete cells (``returns.npy`` present and
-``config.json`` the cell's config) and resumes unfinished ones. Then ``OUT/summary.md`` (per
-cell: window means with 95% intervals, and each window's difference from the first cell) and
-``OUT/summary.png`` (mean curves with 95% bands) compare them.
+sharded run (as ``skillchain train --workers`` runs one): the blocks of every cell share one
+Ray pool, so the workers stay busy across cells. A re-run skips complete cells
+(``returns.npy`` present and ``config.json`` the cell's config) and resumes unfinished ones.
+Then ``OUT/summary.md`` (per cell: window means with 95% intervals, and each window's
+difference from the first cell) and ``OUT/summary.png`` (mean curves with 95% bands) compare
+them.
 
 Fields an agent does not read (``UNREAD_FIELDS``, e.g. ``slots`` for ``flat``) are left at
 their defaults in that agent's cells, so such a grid gives each of them once.
@@ -34,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import UNREAD_FIELDS, TrainConfig
+from ..config import UNREAD_FIELDS, TrainConfig
 
 __all__ = ["load_spec", "expand_grid", "cell_complete", "summary_table", "run_sweep"]
 
@@ -181,7 +182,7 @@ def save_sweep_figure(cells: list[tuple[str, np.ndarray]], path: Path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .plots import plot_learning_curve
+    from ..plots import plot_learning_curve
 
     fig = Figure(figsize=(8, 5))
     FigureCanvasAgg(fig)
@@ -207,7 +208,7 @@ def run_sweep(spec_path: str | Path, out: str | Path | None = None, workers: int
     """
     import os
 
-    from .distributed import ShardedRun, plan_blocks, run_sharded
+    from ..distributed import ShardedRun, plan_blocks, run_sharded
 
     spec = load_spec(spec_path)
     cells = expand_grid(spec, str(spec_path))
