@@ -10,7 +10,7 @@ Each cell is a normal run directory, ``OUT/<cell>/`` (named by its grid values),
 sharded run (as ``skillchain train --workers`` runs one): the blocks of every cell share one
 Ray pool, so the workers stay busy across cells. A re-run skips complete cells
 (``returns.npy`` present and ``config.json`` the cell's config) and resumes unfinished ones.
-Then ``OUT/summary.md`` (per cell: window means with 95% intervals, and each window's
+Then ``OUT/summary.md`` (per cell: window means with 95% t intervals, and each window's
 difference from the first cell) and ``OUT/summary.png`` (mean curves with 95% bands) compare
 them.
 
@@ -147,9 +147,9 @@ def default_windows(episodes: int) -> list[tuple[int, int]]:
 
 
 def summary_table(cells: list[tuple[str, np.ndarray]], windows) -> str:
-    """Markdown: per cell its runs and, per window, the mean return over runs +- the 95%
-    interval, and (second cell on) the difference from the first cell (Welch; ``*`` when the
-    interval excludes 0).
+    """Markdown: per cell its runs and, per window, the mean return over runs +- the 95% t
+    interval, and (second cell on) the difference from the first cell (Welch's t interval;
+    ``*`` when it excludes 0; :mod:`.intervals`).
 
     Example:
         >>> rng = np.random.default_rng(0)
@@ -157,7 +157,8 @@ def summary_table(cells: list[tuple[str, np.ndarray]], windows) -> str:
         ...                     [(1, 2)]).splitlines()[0])
         | cell | runs | episodes 1-2 | 1-2 vs a |
     """
-    from .paper_report import diff_ci, mean_ci, window
+    from .intervals import diff_ci, mean_ci
+    from .paper_report import window
 
     first_name, first = cells[0]
     head = ["cell", "runs"] + [f"episodes {a}-{b}" for a, b in windows]
@@ -248,8 +249,8 @@ def run_sweep(spec_path: str | Path, out: str | Path | None = None, workers: int
                else default_windows(min(r.shape[1] for _, r in results)))
     table = summary_table(results, windows)
     header = (f"# Sweep {Path(spec_path).name}\n\nMean return per run over each window, with "
-              f"its 95% interval over runs; 'vs' columns: the difference from the first cell "
-              f"(Welch 95%; * when the interval excludes 0).\n\n")
+              f"its 95% t interval over runs; 'vs' columns: the difference from the first cell "
+              f"(Welch's 95% t interval; * when it excludes 0).\n\n")
     summary = out / "summary.md"
     summary.write_text(header + table + "\n\n![curves](summary.png)\n")
     save_sweep_figure(results, out / "summary.png")
