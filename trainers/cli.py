@@ -294,7 +294,8 @@ def _train_sharded(parser, args, config, out: Path, native, resume: bool) -> int
     """Train ``config``'s agents in blocks on Ray workers and merge them into ``out``."""
     import time
 
-    from .distributed import ShardedRun, plan_blocks, record_driver_wall, run_sharded
+    from .blocks import ShardedRun, plan_blocks, record_driver_wall
+    from .distributed import run_sharded
 
     if resume:
         run = ShardedRun.load(out, config)

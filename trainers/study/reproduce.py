@@ -163,7 +163,7 @@ def experiment_spans(runs: int, jobs: int) -> list[tuple[int, int]]:
         >>> experiment_spans(100, 2), experiment_spans(3, 2), experiment_spans(1, 2)
         ([(0, 50), (50, 100)], [(0, 2), (2, 3)], [(0, 1)])
     """
-    from ..distributed import block_spans
+    from ..blocks import block_spans
 
     return block_spans(runs, -(-runs // max(1, min(jobs, runs))))
 
@@ -198,8 +198,8 @@ def _launch(out: Path, job: _Job, wall: float = 0.0, jobs: int = 2) -> subproces
 
 def _jobs_of(exp: Experiment, out: Path, jobs: int) -> list[_Job]:
     """What is left to do for ``exp`` (not done): its unfinished blocks, or its merge."""
+    from ..blocks import DONE, SHARDING, ShardedRun
     from ..checkpoint import latest_checkpoint
-    from ..distributed import DONE, SHARDING, ShardedRun
 
     run_dir = out / exp.name
     if not (run_dir / SHARDING).is_file() and latest_checkpoint(run_dir) is not None:
@@ -218,7 +218,7 @@ def _jobs_of(exp: Experiment, out: Path, jobs: int) -> list[_Job]:
 
 
 def _finished(job: _Job, out: Path, code: int) -> bool:
-    from ..distributed import DONE
+    from ..blocks import DONE
 
     if job.kind == "block":
         a, b = job.span
@@ -246,7 +246,7 @@ def run_experiments(experiments: list[Experiment], out: str | Path, jobs: int = 
     done)."""
     from tqdm import tqdm
 
-    from ..distributed import record_driver_wall
+    from ..blocks import record_driver_wall
 
     out = Path(out)
     for exp in experiments:  # refuse a mismatch before anything starts
@@ -355,7 +355,9 @@ def _job_main(argv: list[str] | None = None) -> int:
     ``RUN`` (an older study's one-process run), ``RUN --block a-b`` or ``RUN --merge``."""
     import argparse
 
-    from ..distributed import DONE, ShardedRun, block_config, merge_blocks, run_block
+    from ..block_merge import merge_blocks
+    from ..block_run import run_block
+    from ..blocks import DONE, ShardedRun, block_config
 
     parser = argparse.ArgumentParser(prog="python -m skillchain_torch.trainers.study.reproduce")
     parser.add_argument("run")

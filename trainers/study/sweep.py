@@ -209,7 +209,8 @@ def run_sweep(spec_path: str | Path, out: str | Path | None = None, workers: int
     """
     import os
 
-    from ..distributed import ShardedRun, plan_blocks, run_sharded
+    from ..blocks import ShardedRun, plan_blocks
+    from ..distributed import run_sharded
 
     spec = load_spec(spec_path)
     cells = expand_grid(spec, str(spec_path))

@@ -83,11 +83,9 @@ def test_sweep_without_ray_is_one_line(tmp_path, capsys, monkeypatch):
 def test_doctests():
     import doctest
 
-    from skillchain_torch.trainers import distributed
     from skillchain_torch.trainers.study import sweep
 
-    for module in (distributed, sweep):
-        assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
+    assert doctest.testmod(sweep, optionflags=doctest.ELLIPSIS).failed == 0
 
 
 def test_yaml_spec_reads_as_toml(tmp_path):
