@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from skillchain_torch.trainers.plots import plot_learning_curve
-from skillchain_torch.trainers.summary import window_stats
+from skillchain_torch.trainers.study.summary import window_stats
 
 DEFAULT_WINDOWS = "1-5,6-10,11-20,21-40"
 

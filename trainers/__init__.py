@@ -33,7 +33,7 @@ _EXPORTS = {
     "ProgressBar": "progress",
     "plot_learning_curve": "plots",
     "save_learning_curve": "plots",
-    "summarize": "summary",
+    "summarize": "study.summary",
     "DiscoveryLog": "discovery_log",
     "option_tree": "discovery_log",
     "greedy_trajectory": "option_trajectory",

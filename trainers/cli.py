@@ -5,7 +5,7 @@
     skillchain train --resume runs/flat          # continue from the last checkpoint
     skillchain summarize runs/flat               # the table of returns per episode window
     skillchain train ... --workers 2             # agents in blocks on Ray workers (distributed.py)
-    skillchain sweep grid.toml --out sweeps/x    # a grid of runs on Ray, then a summary (sweep.py)
+    skillchain sweep grid.toml --out sweeps/x    # a grid of runs on Ray, its table (study/sweep)
 
 ``train`` writes ``DIR/config.json``, ``DIR/tb/`` (TensorBoard), ``DIR/checkpoints/``, and at
 the end ``DIR/returns.npy`` (float64 [runs, episodes]), ``DIR/lengths.npy`` (int64),
@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     command = parser.commands[args.command]  # errors print this command's usage
     if args.command == "summarize":
-        from .summary import summarize_dir
+        from .study.summary import summarize_dir
 
         try:
             print(summarize_dir(args.dir))
@@ -55,11 +55,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _reproduce(parser, args) -> int:
-    from .reproduce import reproduce_paper
+    from .study.reproduce import reproduce_paper
 
     try:
         if args.report_only:
-            from .paper_report import write_report
+            from .study.paper_report import write_report
 
             path = write_report(args.out, quiet=args.quiet)
         else:
@@ -78,7 +78,7 @@ def _reproduce(parser, args) -> int:
 
 def _sweep(parser, args) -> int:
     from .distributed import require_ray
-    from .sweep import run_sweep
+    from .study.sweep import run_sweep
 
     try:
         require_ray("skillchain sweep")
@@ -103,7 +103,7 @@ def _sweep(parser, args) -> int:
 
 
 def _verify(parser, args) -> int:
-    from .verify import verify_run
+    from .study.verify import verify_run
 
     try:
         results = verify_run(args.dir, args.agents, progress=True)
@@ -294,7 +294,8 @@ def _train_sharded(parser, args, config, out: Path, native, resume: bool) -> int
     """Train ``config``'s agents in blocks on Ray workers and merge them into ``out``."""
     import time
 
-    from .distributed import ShardedRun, plan_blocks, record_driver_wall, run_sharded
+    from .blocks import ShardedRun, plan_blocks, record_driver_wall
+    from .distributed import run_sharded
 
     if resume:
         run = ShardedRun.load(out, config)

@@ -35,7 +35,7 @@ OUTPUTS = (
     "diverged.json",  # a diverged run's returns so far (PopulationTrainer.DIVERGED_OUTPUTS)
     "partial_returns.npy",
     "partial_lengths.npy",
-    "blocks",  # a sharded run's (distributed.py): --overwrite must not reuse its blocks
+    "blocks",  # a sharded run's (blocks.py): --overwrite must not reuse its blocks
     "sharding.json",
 )
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skillchain_torch.trainers.paper_report import diff_ci, mean_ci
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
 
 HERE = Path(__file__).resolve().parent
 PAPER = HERE.parent / "paper-v2" / "simple"

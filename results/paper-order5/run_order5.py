@@ -2,8 +2,8 @@
 import sys
 from pathlib import Path
 
-from skillchain_torch.trainers.paper_report import write_report
-from skillchain_torch.trainers.reproduce import paper_experiments, run_experiments
+from skillchain_torch.trainers.study.paper_report import write_report
+from skillchain_torch.trainers.study.reproduce import paper_experiments, run_experiments
 
 out = Path(sys.argv[1])
 exps = paper_experiments(runs=100, episodes=250, instances=("simple",), order=5)

@@ -4,7 +4,8 @@
 """
 import numpy as np
 
-from skillchain_torch.trainers.paper_report import WINDOWS, diff_ci, mean_ci, window
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
+from skillchain_torch.trainers.study.paper_report import WINDOWS, window
 
 RUNS = {"flat o4": "results/paper/simple/flat",
         "sc o4": "results/paper/simple/skill-chaining",

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skillchain_torch.trainers.paper_report import WINDOWS, mean_ci, window
+from skillchain_torch.trainers.study.intervals import mean_ci
+from skillchain_torch.trainers.study.paper_report import WINDOWS, window
 
 heads = [f"{a}-{b}" for a, b in WINDOWS]
 heads += [">10k after 50", ">5k after 50", "longest after 50", "steps"]

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skillchain_torch.trainers.paper_report import diff_ci, mean_ci
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
 
 ROOT = Path(__file__).resolve().parents[2]
 MAPS = {"simple": "pinball_simple_single", "hard": "pinball_hard_two_starts"}

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from screen import WINDOWS, load_cell  # (this script's folder is on sys.path)
 
-from skillchain_torch.trainers.paper_report import diff_ci
+from skillchain_torch.trainers.study.intervals import diff_ci
 
 WINDOWS_250 = WINDOWS[:-1] + ((151, 200), (201, 250))
 

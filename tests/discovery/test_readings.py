@@ -1,4 +1,4 @@
-"""The initiation-set readings (issue 15) on crafted corridor walks (see ``test_rules.py``).
+"""The initiation-set readings (issue 15) on crafted corridor walks (see ``corridor.py``).
 
 Each reading's rule is checked where it should act and where it should not: gestation
 positives, the set when gestation ends (everything / fitted), when the distance constraint
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from test_rules import CORRIDOR, YES, R, episode, make_agent, point
+from corridor import CORRIDOR, YES, R, episode, make_agent, point
 
 from skillchain_torch.discovery import InitiationReading, RecentStates
 from skillchain_torch.options import OptionStatus

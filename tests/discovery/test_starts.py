@@ -1,7 +1,7 @@
 """How a joining option starts: its policy (``policy_start``) and ``Q(s, o)`` (``value_start``).
 
 The pure maths (the least-squares maps over the observation grid) is checked on functions it
-must reproduce exactly; the rules through a corridor agent (see ``test_rules.py``) whose top
+must reproduce exactly; the rules through a corridor agent (see ``corridor.py``) whose top
 level is set by hand and frozen, so the option's start can be compared with it.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from test_rules import CORRIDOR, episode, make_agent, point
+from corridor import CORRIDOR, episode, make_agent, point
 
 from skillchain_torch.discovery import SkillChaining
 from skillchain_torch.discovery.gestation import StateValueFit, value_projection

@@ -1,5 +1,7 @@
-"""Tests for the .cfg map parser (skillchain_torch.envs.pinball.maps)."""
+"""Tests for the .cfg map parser (skillchain_torch.envs.pinball.map_parser) and the maps it
+makes (skillchain_torch.envs.pinball.maps)."""
 
+import doctest
 import math
 from pathlib import Path
 
@@ -8,17 +10,18 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from skillchain_torch.envs.pinball.maps import (
-    MAP_NAMES,
-    RADIUS_MAX,
-    RADIUS_MIN,
-    PinballMap,
-    load_map,
-)
+from skillchain_torch.envs.pinball import map_parser, maps
+from skillchain_torch.envs.pinball.map_parser import RADIUS_MAX, RADIUS_MIN
+from skillchain_torch.envs.pinball.maps import MAP_NAMES, PinballMap, load_map
 
 SETTINGS = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 GOOD = "ball 0.02\ntarget 0.9 0.2 0.04\nstart 0.2 0.9\npolygon 0.1 0.1 0.3 0.1 0.2 0.3\n"
 REAL_TEXTS = {n: Path(load_map(n).source).read_text() for n in MAP_NAMES}
+
+
+def test_doctests():
+    for module in (map_parser, maps):
+        assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 
 
 def parse(text):

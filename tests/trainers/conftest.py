@@ -1,6 +1,10 @@
-"""Fixtures of the trainer tests: one local Ray for every Ray test of the session."""
+"""Fixtures of the trainer tests: one local Ray for every Ray test of the session, and a
+finished tiny run for the command-line hardening tests."""
 
 import pytest
+from cli_errors import TINY
+
+from skillchain_torch.trainers.cli import main
 
 
 @pytest.fixture(scope="session")
@@ -12,3 +16,11 @@ def ray_local():
              configure_logging=False)
     yield ray
     ray.shutdown()
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory):
+    """A finished tiny flat run (with its final checkpoint)."""
+    out = tmp_path_factory.mktemp("hardening") / "run"
+    assert main(["train", *TINY, "--out", str(out)]) == 0
+    return out

@@ -2,24 +2,25 @@
 naming the flag, field or file and what it must be, or in correct results; never in silently
 wrong data, and never leaving anything that refuses the corrected command.
 
-The reproducers run the installed console script in a subprocess; the fuzz and the simulated
-full disk call ``main`` in-process.
+This file: the arguments (seeds, flags a run would ignore, sizes, devices) and their fuzz;
+``test_cli_hardening_files.py``: the files. The reproducers run the installed console script
+in a subprocess; the fuzz calls ``main`` in-process (``cli_errors.py``).
 """
 
 import contextlib
-import errno
+import doctest
 import io
 import json
 import os
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 from unittest import mock
 
+import cli_errors
 import numpy as np
 import pytest
 import torch
+from cli_errors import TINY, error_line, main_refused, refused, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -28,51 +29,9 @@ from skillchain_torch.trainers import run_outputs
 from skillchain_torch.trainers.cli import main
 from skillchain_torch.trainers.config import INT64_MAX, ConfigError, TrainConfig
 
-SCRIPT = Path(sys.executable).parent / "skillchain"
-TINY = ["--map", "pinball_box", "--runs", "1", "--episodes", "1", "--max-episode-steps", "50",
-        "--quiet"]
 
-
-def _cli(*argv, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run([str(SCRIPT), *map(str, argv)], capture_output=True, text=True,
-                          timeout=300, cwd=cwd)  # fmt: skip
-
-
-def _error_line(stderr: str, command: str = "train") -> str:
-    assert "Traceback" not in stderr, stderr
-    lines = [line for line in stderr.splitlines() if ": error:" in line]
-    assert len(lines) == 1, stderr
-    assert lines[0].startswith(f"skillchain {command}: error: "), stderr
-    assert stderr.strip().splitlines()[-1] == lines[0], stderr  # the message ends the output
-    return lines[0]
-
-
-def _refused(done: subprocess.CompletedProcess, *fragments, command: str = "train") -> str:
-    assert done.returncode == 2, (done.returncode, done.stderr)
-    line = _error_line(done.stderr, command)
-    for fragment in fragments:
-        assert fragment in line, line
-    return line
-
-
-@pytest.fixture(scope="module")
-def finished_run(tmp_path_factory):
-    """A finished tiny flat run (with its final checkpoint)."""
-    out = tmp_path_factory.mktemp("hardening") / "run"
-    assert main(["train", *TINY, "--out", str(out)]) == 0
-    return out
-
-
-# Each reproducer of the issue runs the console script once (``_cli``); its variants call
-# ``main`` in-process (``_main_refused``), which prints the same line.
-def _main_refused(capsys, argv, *fragments, command: str = "train") -> str:
-    with pytest.raises(SystemExit) as info:
-        main([str(a) for a in argv])
-    assert info.value.code == 2
-    line = _error_line(capsys.readouterr().err, command)
-    for fragment in fragments:
-        assert fragment in line, line
-    return line
+def test_cli_errors_doctest():
+    assert doctest.testmod(cli_errors).failed == 0
 
 
 # 1. seeds ------------------------------------------------------------------------------------
@@ -82,8 +41,8 @@ def _main_refused(capsys, argv, *fragments, command: str = "train") -> str:
 ])
 def test_seeds_outside_the_int64_streams_are_refused(tmp_path, seed, message):
     out = tmp_path / "run"
-    done = _cli("train", *TINY, "--seed", seed, "--out", out)
-    _refused(done, f"--seed: seed must be in [0, {INT64_MAX}]", "seed + p", message)
+    done = run_cli("train", *TINY, "--seed", seed, "--out", out)
+    refused(done, f"--seed: seed must be in [0, {INT64_MAX}]", "seed + p", message)
     assert not out.exists()
 
 
@@ -93,8 +52,8 @@ def test_seeds_outside_the_int64_streams_are_refused(tmp_path, seed, message):
 ])
 def test_seed_plus_the_last_agent_must_fit(tmp_path, capsys, seed, runs, top):
     out = tmp_path / "run"
-    _main_refused(capsys, ["train", *TINY, "--runs", runs, "--seed", seed, "--out", out],
-                  f"--seed: seed must be in [0, {top}]", f"runs = {runs}), got {seed}")
+    main_refused(capsys, ["train", *TINY, "--runs", runs, "--seed", seed, "--out", out],
+                 f"--seed: seed must be in [0, {top}]", f"runs = {runs}), got {seed}")
     assert not out.exists()
 
 
@@ -109,9 +68,9 @@ def test_the_largest_seed_trains(tmp_path):
 # 2. flags that would be silently ignored ----------------------------------------------------
 def test_resume_refuses_out(finished_run, tmp_path):
     before = sorted(p.name for p in finished_run.iterdir())
-    done = _cli("train", "--resume", finished_run, "--out", tmp_path / "elsewhere")
-    _refused(done, "--resume continues with the saved config", f"writing into {finished_run}",
-             "do not pass --out")
+    done = run_cli("train", "--resume", finished_run, "--out", tmp_path / "elsewhere")
+    refused(done, "--resume continues with the saved config", f"writing into {finished_run}",
+            "do not pass --out")
     assert not (tmp_path / "elsewhere").exists()
     assert sorted(p.name for p in finished_run.iterdir()) == before
 
@@ -123,15 +82,16 @@ def test_resume_refuses_out(finished_run, tmp_path):
     (["--out", "y", "--overwrite", "--seed", "3"], "--seed, --out, --overwrite"),
 ])
 def test_resume_refuses_other_flags_it_would_ignore(finished_run, capsys, extra, named):
-    _main_refused(capsys, ["train", "--resume", finished_run, *extra],
-                  "--resume continues with the saved config", f"do not pass {named}")
+    main_refused(capsys, ["train", "--resume", finished_run, *extra],
+                 "--resume continues with the saved config", f"do not pass {named}")
 
 
 def test_options_with_a_flat_agent_are_refused(tmp_path):
     (tmp_path / "opt.pt").write_bytes(b"not read")
     out = tmp_path / "run"
-    done = _cli("train", *TINY, "--agent", "flat", "--options", tmp_path / "opt.pt", "--out", out)
-    _refused(done, "--agent flat does not read --options (only given-options)")
+    done = run_cli("train", *TINY, "--agent", "flat", "--options", tmp_path / "opt.pt",
+                   "--out", out)
+    refused(done, "--agent flat does not read --options (only given-options)")
     assert not out.exists()
 
 
@@ -147,8 +107,8 @@ def test_flags_the_agent_does_not_read_are_refused(tmp_path, capsys, agent, extr
     (tmp_path / "opt.pt").write_bytes(b"not read")
     out = tmp_path / "run"
     extra = [a.format(tmp=tmp_path) for a in extra]
-    _main_refused(capsys, ["train", *TINY, "--agent", agent, *extra, "--out", out],
-                  f"--agent {agent} does not read {named}")
+    main_refused(capsys, ["train", *TINY, "--agent", agent, *extra, "--out", out],
+                 f"--agent {agent} does not read {named}")
     assert not out.exists()
 
 
@@ -162,7 +122,7 @@ def test_flags_the_agent_does_not_read_are_refused(tmp_path, capsys, agent, extr
 ])
 def test_sizes_that_cannot_fit_are_refused_before_allocating(tmp_path, extra, fragments):
     out = tmp_path / "run"
-    _refused(_cli("train", *TINY, *extra, "--out", out), *fragments)
+    refused(run_cli("train", *TINY, *extra, "--out", out), *fragments)
     assert not out.exists()
 
 
@@ -177,7 +137,7 @@ def test_sizes_that_cannot_fit_are_refused_before_allocating(tmp_path, extra, fr
 ])
 def test_other_sizes_that_cannot_fit(tmp_path, capsys, extra, fragments):
     out = tmp_path / "run"
-    _main_refused(capsys, ["train", *TINY, *extra, "--out", out], *fragments)
+    main_refused(capsys, ["train", *TINY, *extra, "--out", out], *fragments)
     assert not out.exists()
 
 
@@ -199,8 +159,8 @@ def test_the_memory_check_reads_the_available_memory(monkeypatch):
 # 4. devices ----------------------------------------------------------------------------------
 def test_an_unknown_device_is_refused(tmp_path):
     out = tmp_path / "run"
-    _refused(_cli("train", *TINY, "--device", "bogus", "--out", out),
-             "--device: device must be a torch device such as cpu, cuda or cuda:0, got 'bogus'")
+    refused(run_cli("train", *TINY, "--device", "bogus", "--out", out),
+            "--device: device must be a torch device such as cpu, cuda or cuda:0, got 'bogus'")
     assert not out.exists()
 
 
@@ -208,175 +168,15 @@ def test_an_absent_cuda_device_is_refused(tmp_path):
     """``cuda`` on a CPU-only torch (on a CUDA machine: one index past the last device)."""
     out = tmp_path / "run"
     absent = f"cuda:{torch.cuda.device_count()}" if torch.cuda.is_available() else "cuda"
-    _refused(_cli("train", *TINY, "--device", absent, "--out", out),
-             f"--device: device '{absent}' is not available")
+    refused(run_cli("train", *TINY, "--device", absent, "--out", out),
+            f"--device: device '{absent}' is not available")
     assert not out.exists()
-
-
-# 5. output directories -----------------------------------------------------------------------
-def _unwritable_parent(tmp_path) -> Path:
-    """A directory in which no directory can be created: mode 0o555, or, as root (whom
-    permissions do not bind), the kernel's /sys."""
-    ro = tmp_path / "ro"
-    ro.mkdir()
-    ro.chmod(0o555)
-    try:
-        (ro / "probe").mkdir()
-    except OSError:
-        return ro
-    (ro / "probe").rmdir()
-    try:
-        Path("/sys/skillchain-probe").mkdir()
-    except OSError:
-        return Path("/sys")
-    Path("/sys/skillchain-probe").rmdir()
-    pytest.skip("running as root, and no directory refuses root's writes (not even /sys)")
-
-
-def test_unwritable_out_is_refused(tmp_path):
-    parent = _unwritable_parent(tmp_path)
-    out = parent / "skillchain-run"
-    line = _refused(_cli("train", *TINY, "--out", out), f"--out {out}: ")
-    assert "not writable" in line or "cannot write there" in line
-    assert not out.exists()
-
-
-def test_out_under_a_regular_file_is_refused(tmp_path):
-    (tmp_path / "afile").write_text("x")
-    _refused(_cli("train", *TINY, "--out", "afile/sub", cwd=tmp_path),
-             "--out afile/sub:", "afile is a file, so no directory can be created under it")
-    assert (tmp_path / "afile").read_text() == "x"
-
-
-def _train_on_a_full_disk(monkeypatch, capsys, module, name, failure, argv) -> str:
-    """Run ``main(argv)`` with ``module.name`` raising ``failure``; its one error line."""
-    def full(*args, **kwargs):
-        raise failure
-
-    with monkeypatch.context() as patch:
-        patch.setattr(module, name, full)
-        with pytest.raises(SystemExit) as info:
-            main(argv)
-    assert info.value.code == 2
-    return _error_line(capsys.readouterr().err)
-
-
-@pytest.mark.parametrize("failure", [
-    RuntimeError("[enforce fail at inline_container.cc:664] . unexpected pos 64 vs 0 "
-                 "PytorchStreamWriter failed writing file data/0: file write failed"),
-    OSError(errno.ENOSPC, "No space left on device"),
-])
-def test_a_full_disk_at_the_first_checkpoint_fails_clearly_and_leaves_nothing(
-        tmp_path, capsys, monkeypatch, failure):
-    out = tmp_path / "run"
-    argv = ["train", *TINY, "--out", str(out)]
-    line = _train_on_a_full_disk(monkeypatch, capsys, torch, "save", failure, argv)
-    assert f"cannot write the run's outputs in {out}" in line
-    assert "No space left on device" in line or "PytorchStreamWriter failed" in line
-    assert "nothing to resume" in line
-    assert not out.exists()  # the same command works once there is space
-    assert main(argv) == 0 and np.load(out / "returns.npy").shape == (1, 1)
-
-
-def test_a_full_disk_after_the_checkpoint_points_to_resume(tmp_path, capsys, monkeypatch):
-    out = tmp_path / "run"
-    argv = ["train", *TINY, "--out", str(out)]
-    failure = OSError(errno.ENOSPC, "No space left on device", str(out / "returns.npy"))
-    line = _train_on_a_full_disk(monkeypatch, capsys, np, "save", failure, argv)
-    assert "No space left on device" in line and f"train --resume {out}" in line
-    assert not (out / "returns.npy").exists()
-    assert main(["train", "--resume", str(out), "--quiet"]) == 0
-    assert np.load(out / "returns.npy").shape == (1, 1)
-
-
-# 6. a corrupt config.json on --resume --------------------------------------------------------
-def _copy_run(finished_run, run: Path, **changes) -> Path:
-    (run / "checkpoints").mkdir(parents=True)
-    for path in ("config.json", "checkpoints/ckpt_000001.pt"):
-        (run / path).write_bytes((finished_run / path).read_bytes())
-    data = json.loads((run / "config.json").read_text())
-    (run / "config.json").write_text(json.dumps({**data, **changes}))
-    return run
-
-
-def test_resume_of_a_config_with_a_wrong_type_names_the_file_and_field(finished_run, tmp_path):
-    run = _copy_run(finished_run, tmp_path / "run", runs="two")
-    _refused(_cli("train", "--resume", run),
-             f"{run / 'config.json'}: runs must be an integer, got 'two'")
-
-
-@pytest.mark.parametrize(("field", "value", "message"), [
-    ("runs", [1, 2], "runs must be an integer, got [1, 2]"),
-    ("runs", 1.0, "runs must be an integer, got 1.0"),
-    ("alpha", "fast", "alpha must be a number or null, got 'fast'"),
-    ("scale_step_size", "yes", "scale_step_size must be true or false, got 'yes'"),
-    ("seed", -5, "seed must be in [0, 9223372036854775807]"),
-    ("device", "cuda:77", "device 'cuda:77' is not available"),
-])
-def test_resume_of_a_config_with_a_wrong_value(finished_run, tmp_path, capsys, field, value,
-                                               message):
-    run = _copy_run(finished_run, tmp_path / "run", **{field: value})
-    _main_refused(capsys, ["train", "--resume", run], f"{run / 'config.json'}: {message}")
-
-
-# 7. summarize of bad arrays ------------------------------------------------------------------
-def _write_arrays(directory: Path, returns, lengths=None) -> Path:
-    np.save(directory / "lengths.npy",
-            np.ones((2, 3), dtype=np.int64) if lengths is None else lengths)
-    if isinstance(returns, bytes):
-        (directory / "returns.npy").write_bytes(returns)
-    else:
-        np.save(directory / "returns.npy", returns)
-    return directory
-
-
-@pytest.mark.parametrize(("returns", "message"), [
-    (np.arange(3.0), "returns.npy: shape (3,); expected a float64 .npy array of shape "
-                     "[runs, episodes]"),
-    (b"garbage", "returns.npy: not a readable .npy array"),
-])
-def test_summarize_of_a_bad_returns_file_names_the_file_and_shape(tmp_path, returns, message):
-    _write_arrays(tmp_path, returns)
-    _refused(_cli("summarize", tmp_path), str(tmp_path / message), command="summarize")
-
-
-@pytest.mark.parametrize(("returns", "message"), [
-    (np.zeros((0, 4)), "returns.npy: shape (0, 4); expected"),
-    (np.zeros((2, 2, 2)), "returns.npy: shape (2, 2, 2); expected"),
-    (np.array([["a", "b"]]), "returns.npy: holds <U1 values; expected"),
-    (np.zeros((2, 5)), "lengths.npy: shape (2, 3) does not match returns.npy's (2, 5)"),
-    (np.full((2, 3), np.inf), "returns.npy: holds infinite returns"),
-])
-def test_summarize_of_other_bad_arrays(tmp_path, capsys, returns, message):
-    _write_arrays(tmp_path, returns)
-    _main_refused(capsys, ["summarize", tmp_path], str(tmp_path / message), command="summarize")
-
-
-def test_summarize_of_a_good_run_still_works(finished_run, capsys):
-    assert main(["summarize", str(finished_run)]) == 0
-    assert "runs: 1, episodes: 1" in capsys.readouterr().out
-
-
-# 8. a refused command leaves nothing behind --------------------------------------------------
-def test_a_refused_command_leaves_nothing_that_blocks_the_corrected_one(tmp_path, capsys):
-    out = tmp_path / "deep" / "run"
-    _refused(_cli("train", *TINY, "--seed", "-1", "--out", out), "--seed")
-    assert not (tmp_path / "deep").exists()
-    # refused while building the agents, after every argument check passed
-    (tmp_path / "garbage.pt").write_bytes(b"garbage")
-    _main_refused(capsys, ["train", *TINY, "--agent", "given-options", "--options",
-                           tmp_path / "garbage.pt", "--out", out], "garbage.pt")
-    assert not (tmp_path / "deep").exists()
-    # an existing empty --out stays usable
-    out.mkdir(parents=True)
-    _main_refused(capsys, ["train", *TINY, "--device", "bogus", "--out", out], "--device")
-    assert list(out.iterdir()) == []
-    assert main(["train", *TINY, "--seed", "0", "--out", str(out)]) == 0
-    assert np.load(out / "returns.npy").shape == (1, 1)
 
 
 # fuzz ----------------------------------------------------------------------------------------
 BIG = [-(2**63) - 1, -1, 0, 2**63 - 1, 2**63, 2**64, 10**20]
+
+
 FLAGS = {
     "--map": st.sampled_from(["pinball_box", "pinball_nope", ""]),
     "--runs": st.sampled_from([1, 2, 0, 10**9, *BIG]),
@@ -399,6 +199,8 @@ FLAGS = {
     "--device": st.sampled_from(["cpu", "bogus", "cuda:999", "meta", ""]),
     "--threads": st.sampled_from([1, 2, 0, -1, 10**20]),
 }
+
+
 SWITCHES = ["--scale-step-size", "--initiation-centered", "--wait-for-both-classes",
             "--overwrite", "--torch-only"]
 
@@ -457,7 +259,7 @@ def test_fuzzed_train_arguments_end_in_a_clear_error_or_a_correct_run(case):
                 assert np.array_equal(returns, before)
             return
         assert code == 2, (argv, code, err)
-        line = _error_line(err)
+        line = error_line(err)
         assert "--" in line or ".json" in line or ".pt" in line or "map" in line, line
         if not resume:
             assert not out.exists() or not any(out.iterdir()), (argv, os.listdir(out))

@@ -11,7 +11,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from skillchain_torch.trainers import PopulationTrainer, ProgressBar, TensorBoardHook, TrainConfig
 from skillchain_torch.trainers.logging import population_interval
 from skillchain_torch.trainers.plots import learning_curve, save_learning_curve
-from skillchain_torch.trainers.summary import summarize
+from skillchain_torch.trainers.study.summary import summarize
 
 
 def test_doctests():

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+from skillchain_torch.trainers.blocks import ShardedRun, block_spans
 from skillchain_torch.trainers.cli import main
-from skillchain_torch.trainers.distributed import ShardedRun, block_spans, run_sharded
+from skillchain_torch.trainers.distributed import run_sharded
 
 TINY = dict(runs=4, episodes=3, max_episode_steps=200, seed=3)
 
@@ -193,7 +194,7 @@ def test_sharding_flags_are_checked(tmp_path, capsys, argv, message):
 @pytest.mark.parametrize("runs", [1, 2, 7, 30, 100])
 @pytest.mark.parametrize("workers", [1, 2, 3, 16])
 def test_shrinking_blocks_cover_every_agent_once(runs, workers):
-    from skillchain_torch.trainers.distributed import guided_spans
+    from skillchain_torch.trainers.blocks import guided_spans
 
     spans = guided_spans(runs, workers)
     assert [a for a, _ in spans] == [0] + [b for _, b in spans[:-1]] and spans[-1][1] == runs
@@ -201,10 +202,19 @@ def test_shrinking_blocks_cover_every_agent_once(runs, workers):
     assert sizes == sorted(sizes, reverse=True) and sizes[-1] == 1
 
 
+@pytest.mark.parametrize("name", ["blocks", "block_run", "block_merge", "distributed"])
+def test_doctests(name):
+    import doctest
+    import importlib
+
+    module = importlib.import_module(f"skillchain_torch.trainers.{name}")
+    assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
+
+
 def test_default_blocks_are_one_per_worker_and_shrink_is_guided():
     """Measured on an idle machine, batching beats balancing (benchmarks/README.md): by default
     each worker takes one block; ``shrink`` is the guided schedule."""
-    from skillchain_torch.trainers.distributed import guided_spans, plan_blocks
+    from skillchain_torch.trainers.blocks import guided_spans, plan_blocks
 
     assert plan_blocks(100, 2) == [(0, 50), (50, 100)]
     assert plan_blocks(7, 3) == [(0, 3), (3, 6), (6, 7)]

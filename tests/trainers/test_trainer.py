@@ -16,7 +16,7 @@ def _run(runs, seed, scalar_max=128, native=None, **kwargs):
 
 
 def test_doctests():
-    for name in ("population", "summary", "plots"):
+    for name in ("population", "study", "study.summary", "plots"):
         module = importlib.import_module(f"skillchain_torch.trainers.{name}")
         assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 

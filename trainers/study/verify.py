@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import TrainConfig
+from ..config import TrainConfig
 
 __all__ = ["verify_run", "resolve_options_path"]
 
@@ -77,7 +77,7 @@ def verify_run(run_dir: str | Path, agents, native: bool | None = None,
     given-options run's options are rebuilt). ``ValueError`` names a missing file or an agent
     outside the run.
     """
-    from .population import PopulationTrainer
+    from ..population import PopulationTrainer
 
     run_dir = Path(run_dir)
     for name in ("config.json", "returns.npy", "lengths.npy"):

@@ -1,55 +1,38 @@
 """The report of ``skillchain reproduce paper``: tables with 95% intervals and the claims checked.
 
 Statistics are over runs: each run's mean return over an episode window, then the mean over
-runs with a 95% interval (mean +- 1.96 sd / sqrt(n)). A difference between two agent kinds is
-the difference of their window means with a Welch 95% interval (1.96 sqrt(sd_a^2 / n_a +
-sd_b^2 / n_b)); "consistency" is the sd over runs of the window mean, compared as a ratio with a
-bootstrap 95% interval (2,000 resamples of the runs, a fixed seed).
+runs with a 95% Student t interval (mean +- t(n - 1) sd / sqrt(n)). A difference between two
+agent kinds is the difference of their window means with Welch's 95% t interval
+(:mod:`.intervals`); "consistency" is the sd over runs of the window mean, compared as a ratio
+with a bootstrap 95% interval (2,000 resamples of the runs, a fixed seed).
 
 Example:
     >>> import numpy as np
     >>> a, b = np.array([[1.0, 3.0], [3.0, 5.0]]), np.array([[0.0, 0.0], [2.0, 2.0]])
-    >>> mean, half = mean_ci(window(a, 1, 2))
-    >>> float(mean), round(float(half), 3)
-    (3.0, 2.772)
-    >>> d, half = diff_ci(window(a, 1, 2), window(b, 1, 2))
-    >>> float(d)
-    2.0
+    >>> window(a, 1, 2).tolist()
+    [2.0, 4.0]
+    >>> _fmt_diff(*diff_ci(window(a, 1, 2), window(b, 1, 2)))
+    '+2 ± 6'
 """
 
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["window", "mean_ci", "diff_ci", "sd_ratio_ci", "check_claims", "write_report",
-           "WINDOWS"]  # fmt: skip
+from .intervals import diff_ci, mean_ci
+
+__all__ = ["window", "sd_ratio_ci", "check_claims", "write_report", "WINDOWS"]
 
 WINDOWS = ((1, 10), (11, 25), (26, 50), (51, 100), (101, 150), (151, 200), (201, 250))
-Z = 1.96
 
 
 def window(returns, first: int, last: int) -> np.ndarray:
     """Each run's mean over episodes ``first..last`` (1-based, inclusive): ``[runs]``."""
     r = np.asarray(returns, dtype=np.float64)
     return r[:, first - 1 : min(last, r.shape[1])].mean(axis=1)
-
-
-def mean_ci(x) -> tuple[float, float]:
-    """``(mean, half-width of the 95% interval)`` over runs."""
-    x = np.asarray(x, dtype=np.float64)
-    half = Z * x.std(ddof=1) / math.sqrt(x.size) if x.size > 1 else float("nan")
-    return float(x.mean()), float(half)
-
-
-def diff_ci(x, y) -> tuple[float, float]:
-    """``(mean(x) - mean(y), Welch 95% half-width)``."""
-    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
-    se = math.sqrt(x.var(ddof=1) / x.size + y.var(ddof=1) / y.size)
-    return float(x.mean() - y.mean()), float(Z * se)
 
 
 def sd_ratio_ci(x, y, resamples: int = 2000, seed: int = 0) -> tuple[float, float, float]:
@@ -212,9 +195,10 @@ def write_report(out: str | Path, names: list[str] | None = None, quiet: bool = 
             instance, agent = name.split("/")
             by_instance.setdefault(instance, {})[agent] = _load(out / name)
     md = ["# Skill chaining on Pinball: the paper's experiments", "",
-          "Written by `skillchain reproduce paper` (`skillchain_torch.trainers.reproduce`). Mean "
-          "return over runs of each run's window mean ± a 95% interval; differences with a "
-          "Welch 95% interval (`*`: the interval excludes 0).", ""]  # fmt: skip
+          "Written by `skillchain reproduce paper` (`skillchain_torch.trainers.study.reproduce`). "
+          "Mean return over runs of each run's window mean ± a 95% Student t interval; "
+          "differences with Welch's 95% t interval (`*`: the interval excludes 0).",
+          ""]  # fmt: skip
     report = {}
     for instance, runs in by_instance.items():
         if "flat" not in runs:

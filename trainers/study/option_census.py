@@ -6,7 +6,7 @@ far from the goal, times out and is fitted on that single negative example dies 
 census counts, per agent, the executable options and those whose set is empty on a Figure-5
 probe grid (positions on a grid, velocities in {-1, -1/2, 0, 1/2, 1}).
 
-    python -m skillchain_torch.trainers.option_census runs/paper/simple/skill-chaining
+    python -m skillchain_torch.trainers.study.option_census runs/paper/simple/skill-chaining
 
 Example:
     >>> from skillchain_torch.options import OptionBank, OptionStatus
@@ -27,7 +27,7 @@ import torch
 
 from skillchain_torch.options import OptionBank
 
-from .option_monitor import probe_observations
+from ..option_monitor import probe_observations
 
 __all__ = ["census", "main"]
 

@@ -14,12 +14,12 @@ for skill chaining ``n_options.npy`` and ``option_tree.json``), under ``DIR/<ins
 Every agent of an instance uses the same seeds (``--seed``, agent p: seed + p), so the agents
 of different kinds are paired. By the seed contract agents ``[a, b)`` of a run are the
 population run of ``b - a`` agents seeded ``seed + a``, bit for bit, so each run is cut into
-``--jobs`` blocks (:mod:`.distributed`'s layout: ``RUN_DIR/blocks/<a>-<b>/``), and blocks, not
-runs, are the jobs: ``--jobs`` processes at a time (both cores of a 2-core machine by default),
-the skill-chaining blocks first, as the given-options runs wait for their options. A run's
-blocks are merged (in a process of their own) into the files a one-process run writes. Whole
-runs as jobs left a core idle while one long skill-chaining run went on. ``DIR/timing.json``
-records each invocation's wall time.
+``--jobs`` blocks (the layout of ``skillchain train --workers``: ``RUN_DIR/blocks/<a>-<b>/``),
+and blocks, not runs, are the jobs: ``--jobs`` processes at a time (both cores of a 2-core
+machine by default), the skill-chaining blocks first, as the given-options runs wait for their
+options. A run's blocks are merged (in a process of their own) into the files a one-process run
+writes. Whole runs as jobs left a core idle while one long skill-chaining run went on.
+``DIR/timing.json`` records each invocation's wall time.
 Then :mod:`.paper_report` writes ``DIR/README.md`` (tables with 95% intervals, the paper's
 claims checked) and the figures (4a-8, :mod:`.paper_figures`).
 
@@ -49,7 +49,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import TrainConfig
+from ..config import TrainConfig
 
 __all__ = ["Experiment", "paper_experiments", "run_state", "run_experiments", "train_dir",
            "experiment_spans", "INSTANCES"]  # fmt: skip
@@ -107,7 +107,7 @@ def paper_experiments(runs: int = 100, episodes: int = 250, hard_runs: int = 60,
 def run_state(run_dir: Path) -> str:
     """``"done"`` (``run_info.json`` written), ``"partial"`` (a checkpoint to resume from) or
     ``"new"``."""
-    from .checkpoint import latest_checkpoint
+    from ..checkpoint import latest_checkpoint
 
     if (run_dir / "run_info.json").is_file() and (run_dir / "returns.npy").is_file():
         return "done"
@@ -131,9 +131,10 @@ def train_dir(run_dir: str | Path, quiet: bool = True, threads: int = 1) -> int:
     """Train the run described by ``run_dir/config.json``: continue it from its last checkpoint
     if it has one, else start it; nothing if it is done. The exit code of ``skillchain train``.
     """
-    from .checkpoint import latest_checkpoint, load_checkpoint
-    from .cli import _prepare_out, _run
-    from .population import PopulationTrainer
+    from ..checkpoint import latest_checkpoint, load_checkpoint
+    from ..cli import _run
+    from ..out_dir import _prepare_out
+    from ..population import PopulationTrainer
 
     run_dir = Path(run_dir)
     state = run_state(run_dir)
@@ -162,7 +163,7 @@ def experiment_spans(runs: int, jobs: int) -> list[tuple[int, int]]:
         >>> experiment_spans(100, 2), experiment_spans(3, 2), experiment_spans(1, 2)
         ([(0, 50), (50, 100)], [(0, 2), (2, 3)], [(0, 1)])
     """
-    from .distributed import block_spans
+    from ..blocks import block_spans
 
     return block_spans(runs, -(-runs // max(1, min(jobs, runs))))
 
@@ -184,7 +185,7 @@ class _Job:
 
 def _launch(out: Path, job: _Job, wall: float = 0.0, jobs: int = 2) -> subprocess.Popen:
     # From the study's folder, where the given-options runs' options paths are relative to.
-    cmd = [sys.executable, "-m", "skillchain_torch.trainers.reproduce", job.exp.name]
+    cmd = [sys.executable, "-m", "skillchain_torch.trainers.study.reproduce", job.exp.name]
     if job.kind == "block":
         cmd += ["--block", f"{job.span[0]}-{job.span[1]}"]
     elif job.kind == "merge":
@@ -197,8 +198,8 @@ def _launch(out: Path, job: _Job, wall: float = 0.0, jobs: int = 2) -> subproces
 
 def _jobs_of(exp: Experiment, out: Path, jobs: int) -> list[_Job]:
     """What is left to do for ``exp`` (not done): its unfinished blocks, or its merge."""
-    from .checkpoint import latest_checkpoint
-    from .distributed import DONE, SHARDING, ShardedRun
+    from ..blocks import DONE, SHARDING, ShardedRun
+    from ..checkpoint import latest_checkpoint
 
     run_dir = out / exp.name
     if not (run_dir / SHARDING).is_file() and latest_checkpoint(run_dir) is not None:
@@ -217,7 +218,7 @@ def _jobs_of(exp: Experiment, out: Path, jobs: int) -> list[_Job]:
 
 
 def _finished(job: _Job, out: Path, code: int) -> bool:
-    from .distributed import DONE
+    from ..blocks import DONE
 
     if job.kind == "block":
         a, b = job.span
@@ -245,7 +246,7 @@ def run_experiments(experiments: list[Experiment], out: str | Path, jobs: int = 
     done)."""
     from tqdm import tqdm
 
-    from .distributed import record_driver_wall
+    from ..blocks import record_driver_wall
 
     out = Path(out)
     for exp in experiments:  # refuse a mismatch before anything starts
@@ -354,9 +355,11 @@ def _job_main(argv: list[str] | None = None) -> int:
     ``RUN`` (an older study's one-process run), ``RUN --block a-b`` or ``RUN --merge``."""
     import argparse
 
-    from .distributed import DONE, ShardedRun, block_config, merge_blocks, run_block
+    from ..block_merge import merge_blocks
+    from ..block_run import run_block
+    from ..blocks import DONE, ShardedRun, block_config
 
-    parser = argparse.ArgumentParser(prog="python -m skillchain_torch.trainers.reproduce")
+    parser = argparse.ArgumentParser(prog="python -m skillchain_torch.trainers.study.reproduce")
     parser.add_argument("run")
     parser.add_argument("--block", default=None, help="a-b: train agents [a, b)")
     parser.add_argument("--merge", action="store_true", help="merge the finished blocks")

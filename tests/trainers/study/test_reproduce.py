@@ -58,9 +58,10 @@ def test_reproduce_resumes_and_its_runs_verify(tmp_path):
 def test_figures_take_the_trained_agents_of_a_sharded_run_from_a_block(tmp_path):
     """A run sharded on Ray keeps its checkpoints in its blocks: the figures take the block
     whose agents hold the most options and label its agents by their place in the run."""
+    from skillchain_torch.trainers.block_run import run_block
+    from skillchain_torch.trainers.blocks import block_config
     from skillchain_torch.trainers.config import TrainConfig
-    from skillchain_torch.trainers.distributed import block_config, run_block
-    from skillchain_torch.trainers.paper_figures import load_trained, trained_agents
+    from skillchain_torch.trainers.study.paper_figures import load_trained, trained_agents
 
     cfg = TrainConfig(agent="skill-chaining", map="pinball_box", runs=3, episodes=3, seed=11,
                       max_episode_steps=300, checkpoint_every=1, gestation=1).resolved()
@@ -87,7 +88,7 @@ def test_figures_take_the_trained_agents_of_a_sharded_run_from_a_block(tmp_path)
 def test_jobs_of_a_run_resume_where_it_stopped(tmp_path):
     """A new run is cut into one block per job; finished blocks are skipped; once all are
     done only the merge is left; an older study's interrupted one-process run stays whole."""
-    from skillchain_torch.trainers.reproduce import _jobs_of, paper_experiments
+    from skillchain_torch.trainers.study.reproduce import _jobs_of, paper_experiments
 
     exp = paper_experiments(runs=5, episodes=2, instances=("simple",))[0]
     jobs = _jobs_of(exp, tmp_path, jobs=2)

@@ -7,7 +7,7 @@ import pytest
 
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 from skillchain_torch.trainers.cli import main
-from skillchain_torch.trainers.sweep import expand_grid
+from skillchain_torch.trainers.study.sweep import expand_grid
 
 SPEC = """
 [base]
@@ -83,15 +83,14 @@ def test_sweep_without_ray_is_one_line(tmp_path, capsys, monkeypatch):
 def test_doctests():
     import doctest
 
-    from skillchain_torch.trainers import distributed, sweep
+    from skillchain_torch.trainers.study import sweep
 
-    for module in (distributed, sweep):
-        assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
+    assert doctest.testmod(sweep, optionflags=doctest.ELLIPSIS).failed == 0
 
 
 def test_yaml_spec_reads_as_toml(tmp_path):
     pytest.importorskip("yaml")
-    from skillchain_torch.trainers.sweep import load_spec
+    from skillchain_torch.trainers.study.sweep import load_spec
 
     (tmp_path / "a.toml").write_text(SPEC)
     (tmp_path / "a.yaml").write_text("base: {runs: 2, episodes: 3, max_episode_steps: 150, "

@@ -7,11 +7,12 @@ top-level keys: ``out``, ``workers``, ``block_size``; optional ``[summary] windo
 inclusive episode windows of the table (default: the first and last tenth of the episodes).
 
 Each cell is a normal run directory, ``OUT/<cell>/`` (named by its grid values), trained as a
-sharded run (:mod:`.distributed`): the blocks of every cell share one Ray pool, so the
-workers stay busy across cells. A re-run skips complete cells (``returns.npy`` present and
-``config.json`` the cell's config) and resumes unfinished ones. Then ``OUT/summary.md`` (per
-cell: window means with 95% intervals, and each window's difference from the first cell) and
-``OUT/summary.png`` (mean curves with 95% bands) compare them.
+sharded run (as ``skillchain train --workers`` runs one): the blocks of every cell share one
+Ray pool, so the workers stay busy across cells. A re-run skips complete cells
+(``returns.npy`` present and ``config.json`` the cell's config) and resumes unfinished ones.
+Then ``OUT/summary.md`` (per cell: window means with 95% t intervals, and each window's
+difference from the first cell) and ``OUT/summary.png`` (mean curves with 95% bands) compare
+them.
 
 Fields an agent does not read (``UNREAD_FIELDS``, e.g. ``slots`` for ``flat``) are left at
 their defaults in that agent's cells, so such a grid gives each of them once.
@@ -34,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import UNREAD_FIELDS, TrainConfig
+from ..config import UNREAD_FIELDS, TrainConfig
 
 __all__ = ["load_spec", "expand_grid", "cell_complete", "summary_table", "run_sweep"]
 
@@ -146,9 +147,9 @@ def default_windows(episodes: int) -> list[tuple[int, int]]:
 
 
 def summary_table(cells: list[tuple[str, np.ndarray]], windows) -> str:
-    """Markdown: per cell its runs and, per window, the mean return over runs +- the 95%
-    interval, and (second cell on) the difference from the first cell (Welch; ``*`` when the
-    interval excludes 0).
+    """Markdown: per cell its runs and, per window, the mean return over runs +- the 95% t
+    interval, and (second cell on) the difference from the first cell (Welch's t interval;
+    ``*`` when it excludes 0; :mod:`.intervals`).
 
     Example:
         >>> rng = np.random.default_rng(0)
@@ -156,7 +157,8 @@ def summary_table(cells: list[tuple[str, np.ndarray]], windows) -> str:
         ...                     [(1, 2)]).splitlines()[0])
         | cell | runs | episodes 1-2 | 1-2 vs a |
     """
-    from .paper_report import diff_ci, mean_ci, window
+    from .intervals import diff_ci, mean_ci
+    from .paper_report import window
 
     first_name, first = cells[0]
     head = ["cell", "runs"] + [f"episodes {a}-{b}" for a, b in windows]
@@ -181,7 +183,7 @@ def save_sweep_figure(cells: list[tuple[str, np.ndarray]], path: Path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .plots import plot_learning_curve
+    from ..plots import plot_learning_curve
 
     fig = Figure(figsize=(8, 5))
     FigureCanvasAgg(fig)
@@ -207,7 +209,8 @@ def run_sweep(spec_path: str | Path, out: str | Path | None = None, workers: int
     """
     import os
 
-    from .distributed import ShardedRun, plan_blocks, run_sharded
+    from ..blocks import ShardedRun, plan_blocks
+    from ..distributed import run_sharded
 
     spec = load_spec(spec_path)
     cells = expand_grid(spec, str(spec_path))
@@ -247,8 +250,8 @@ def run_sweep(spec_path: str | Path, out: str | Path | None = None, workers: int
                else default_windows(min(r.shape[1] for _, r in results)))
     table = summary_table(results, windows)
     header = (f"# Sweep {Path(spec_path).name}\n\nMean return per run over each window, with "
-              f"its 95% interval over runs; 'vs' columns: the difference from the first cell "
-              f"(Welch 95%; * when the interval excludes 0).\n\n")
+              f"its 95% t interval over runs; 'vs' columns: the difference from the first cell "
+              f"(Welch's 95% t interval; * when it excludes 0).\n\n")
     summary = out / "summary.md"
     summary.write_text(header + table + "\n\n![curves](summary.png)\n")
     save_sweep_figure(results, out / "summary.png")

@@ -5,7 +5,7 @@ import doctest
 import torch
 
 from skillchain_torch.options import OptionBank, OptionStatus
-from skillchain_torch.trainers import option_census
+from skillchain_torch.trainers.study import option_census
 
 
 def test_doctest():

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .option_trajectory import OPTION_COLORS, _single_agent, greedy_trajectory
+from ..option_trajectory import OPTION_COLORS, _single_agent, greedy_trajectory
 
 __all__ = ["plot_curves", "load_trained", "trained_agents", "good_solutions", "solution_figure",
            "option_rollout", "initiation_figure", "AGENT_COLORS"]  # fmt: skip
@@ -49,7 +49,7 @@ def _save(fig, path, title: str, dpi: int) -> Path:
 def plot_curves(returns: dict, ax=None, title: str | None = None, smooth: int = 1):
     """Each ``returns[name] [runs, episodes]`` as a mean curve with a 95% band (mean +- 1.96
     sd / sqrt(runs)), optionally averaged over ``smooth`` episodes."""
-    from .plots import learning_curve
+    from ..plots import learning_curve
 
     if ax is None:
         import matplotlib.pyplot as plt
@@ -81,9 +81,9 @@ def load_trained(run_dir: str | Path):
     ``skillchain verify`` does); the checkpoint is loaded with that path in its config."""
     import dataclasses
 
-    from .checkpoint import latest_checkpoint, read_checkpoint
-    from .config import TrainConfig
-    from .population import PopulationTrainer
+    from ..checkpoint import latest_checkpoint, read_checkpoint
+    from ..config import TrainConfig
+    from ..population import PopulationTrainer
     from .verify import resolve_options_path
 
     run_dir = Path(run_dir)
@@ -116,7 +116,7 @@ def trained_agents(run_dir: str | Path):
     """
     import json
 
-    from .checkpoint import latest_checkpoint
+    from ..checkpoint import latest_checkpoint
 
     run_dir = Path(run_dir)
     sharding = run_dir / "sharding.json"
@@ -164,7 +164,7 @@ def solution_figure(runs: list[dict], map_name: str, path: str | Path, title: st
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .option_trajectory import plot_option_trajectory
+    from ..option_trajectory import plot_option_trajectory
 
     fig, axes = plt.subplots(1, len(runs), figsize=(5 * len(runs), 5), squeeze=False)
     for ax, run in zip(axes[0], runs):
@@ -213,7 +213,7 @@ def initiation_figure(agent, runs: list[dict], map_name: str, path: str | Path,
 
     from skillchain_torch.envs.pinball import load_map
 
-    from .option_monitor import plot_initiation_set
+    from ..option_monitor import plot_initiation_set
 
     pinball_map = load_map(map_name)
     used = []

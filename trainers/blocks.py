@@ -1,0 +1,137 @@
+"""How ``--workers`` cuts a run's P agents into blocks, and the record it keeps of the cut.
+
+By the seed contract the agents ``[a, b)`` of a run seeded ``S`` are the population run with
+``runs = b - a`` and ``seed = S + a``, bit for bit (:func:`block_config`). A sharded run
+(:class:`ShardedRun`) trains each block in ``RUN_DIR/blocks/<a>-<b>/``
+(:mod:`.block_run`), records its blocks and the driver's wall time in ``RUN_DIR/sharding.json``
+(``SHARDING``, read by ``--resume``), and takes a block as finished once its ``block.json``
+(``DONE``) is written. :func:`plan_blocks` chooses the blocks.
+
+Example:
+    >>> plan_blocks(10, 2), plan_blocks(10, 2, block_size=4)
+    ([(0, 5), (5, 10)], [(0, 4), (4, 8), (8, 10)])
+    >>> run = ShardedRun(TrainConfig(runs=10), Path("runs/flat"), plan_blocks(10, 2))
+    >>> run.block_dir(run.spans[1]).as_posix()
+    'runs/flat/blocks/5-10'
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+from .config import TrainConfig
+
+__all__ = ["SHARDING", "DONE", "guided_spans", "plan_blocks", "block_spans", "block_config",
+           "ShardedRun", "record_driver_wall", "previous_driver_wall"]
+
+SHARDING = "sharding.json"  # RUN_DIR's record of the blocks (read by --resume)
+DONE = "block.json"  # written last by a finished block
+
+
+def guided_spans(runs: int, workers: int) -> list[tuple[int, int]]:
+    """Blocks that shrink as the run goes (guided self-scheduling): each takes a ``2 * workers``-th
+    of the agents not yet handed out. The first blocks are large, so most agents share the
+    batched steps (a flat agent's step costs ~10x less per agent at P = 100 than alone); the
+    last are single agents, so the run's tail is spread over every worker.
+
+    Example:
+        >>> guided_spans(10, 2)
+        [(0, 3), (3, 5), (5, 7), (7, 8), (8, 9), (9, 10)]
+        >>> [b - a for a, b in guided_spans(100, 2)]
+        [25, 19, 14, 11, 8, 6, 5, 3, 3, 2, 1, 1, 1, 1]
+    """
+    spans, a = [], 0
+    while a < runs:
+        size = max(1, -(-(runs - a) // (2 * workers)))
+        spans.append((a, a + size))
+        a += size
+    return spans
+
+
+def plan_blocks(runs: int, workers: int,
+                block_size: int | str | None = None) -> list[tuple[int, int]]:  # fmt: skip
+    """Blocks of ``block_size`` agents, by default one block per worker (``"shrink"``:
+    :func:`guided_spans`).
+
+    One block per worker is the default because batching is worth more than balancing here:
+    measured on an idle 2-core machine (``benchmarks/README.md``), skill chaining 10 x 40 took
+    0.43x one process's time in 2 blocks and 0.88x in :func:`guided_spans`'s 6 shrinking
+    blocks, whose single-agent blocks pay a step ~10x dearer per agent than a batched one.
+    Smaller blocks are handed out as workers free up (``--block-size``).
+
+    Example:
+        >>> plan_blocks(10, 2), plan_blocks(10, 2, block_size=3)
+        ([(0, 5), (5, 10)], [(0, 3), (3, 6), (6, 9), (9, 10)])
+    """
+    if block_size == "shrink":
+        return guided_spans(runs, workers)
+    size = -(-runs // max(1, workers)) if block_size is None else block_size
+    return block_spans(runs, size)
+
+
+def block_spans(runs: int, block_size: int) -> list[tuple[int, int]]:
+    """The agent ranges ``[a, b)`` of blocks of ``block_size`` agents (the last may be short).
+
+    Example:
+        >>> block_spans(5, 2)
+        [(0, 2), (2, 4), (4, 5)]
+    """
+    return [(a, min(a + block_size, runs)) for a in range(0, runs, block_size)]
+
+
+def block_config(config: TrainConfig, a: int, b: int, block_dir: Path) -> TrainConfig:
+    """The population run of agents ``[a, b)`` of ``config`` (the seed contract: ``seed + a``).
+
+    A given-options run with ``--options-agent each`` gives agent p saved agent p mod N's
+    options; a block's agent q is agent a + q, so the block gets a file of exactly those.
+    """
+    block = dataclasses.replace(config, runs=b - a, seed=config.seed + a)
+    if config.agent == "given-options" and config.options_agent is None:
+        from skillchain_torch.options import OptionBank
+
+        path = block_dir / "given_options.pt"
+        if not path.is_file():
+            saved = OptionBank.load(config.options)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            saved.select_agents([p % saved.population for p in range(a, b)]).save(path)
+        block = dataclasses.replace(block, options=str(path))
+    return block
+
+
+@dataclasses.dataclass
+class ShardedRun:
+    """A run to shard: its config, its directory and its blocks (``[a, b)`` agent ranges)."""
+
+    config: TrainConfig
+    out: Path
+    spans: list[tuple[int, int]]
+
+    def block_dir(self, span: tuple[int, int]) -> Path:
+        return self.out / "blocks" / f"{span[0]}-{span[1]}"
+
+    def save(self, workers: int) -> None:
+        record = {"workers": workers, "blocks": [list(s) for s in self.spans]}
+        (self.out / SHARDING).write_text(json.dumps(record) + "\n")
+
+    @classmethod
+    def load(cls, out: Path, config: TrainConfig) -> ShardedRun:
+        record = json.loads((Path(out) / SHARDING).read_text())
+        return cls(config, Path(out), [tuple(s) for s in record["blocks"]])
+
+
+def record_driver_wall(out: Path, seconds: float) -> None:
+    """Add ``seconds`` to the driver time saved in ``out/sharding.json`` (for --resume)."""
+    path = Path(out) / SHARDING
+    record = json.loads(path.read_text())
+    record["driver_wall_time_s"] = record.get("driver_wall_time_s", 0.0) + seconds
+    path.write_text(json.dumps(record) + "\n")
+
+
+def previous_driver_wall(out: Path) -> float:
+    """Driver seconds of earlier invocations of a resumed run (saved in sharding.json)."""
+    try:
+        return float(json.loads((out / SHARDING).read_text()).get("driver_wall_time_s", 0.0))
+    except (OSError, ValueError):
+        return 0.0
