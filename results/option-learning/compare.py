@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
+
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "gym"))
-from report import diff_ci, mean_ci  # noqa: E402  (Student-t intervals, shared with results/gym)
 
 WINDOWS = ((1, 10), (11, 25), (26, 50), (51, 100), (101, 150), (151, 200), (201, 250))
 
