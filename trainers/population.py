@@ -96,12 +96,13 @@ class PopulationTrainer(DivergenceCheck):
         native: the compiled code (default: when built, on the CPU): the Pinball step, which
             gives the same bits as the Python paths (:class:`ActiveEnvStepper`), and the flat
             agent's kernels, which agree with its torch path to rounding
-            (:class:`~.flat.FlatSarsaAgent`). ``False`` runs torch and Python only.
+            (:class:`~skillchain_torch.agents.FlatSarsaAgent`). ``False`` runs torch and Python
+            only.
         num_threads: torch intra-op threads while :meth:`train` runs (restored afterwards);
             ``None`` keeps torch's setting. Default 1: the per-step tensors are small, and a
             parallel region waits for a busy core (10x slowdowns on a shared machine).
         agent: an agent object of your own composition (``config.runs`` agents, the episode
-            protocol of :class:`~.flat.FlatSarsaAgent`, e.g. a
+            protocol of :class:`~skillchain_torch.agents.FlatSarsaAgent`, e.g. a
             :class:`~skillchain_torch.agents.SkillChainingAgent` with your own pieces);
             ``None`` builds ``config.agent`` by name.
 

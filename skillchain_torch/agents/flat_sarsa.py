@@ -21,7 +21,7 @@ On the CPU, when the extension is built, the same steps run in C instead (:mod:`
 and the update, with dot products summed in an order of its own, so the weights agree with the
 library pieces to rounding rather than bit for bit (the features are FourierBasis's either way).
 
-``tests/trainers/test_flat.py`` checks the torch path against the library pieces bit for bit,
+``tests/agents/test_flat_sarsa.py`` checks the torch path against the library pieces bit for bit,
 and the compiled path to 1e-10 with the same decisions.
 
 Episode protocol (driven by the trainer, rows = active agents in ascending id order):
@@ -34,6 +34,7 @@ state *after* their update); ``compact(keep)`` drops agents that finished all th
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
@@ -46,10 +47,11 @@ from skillchain_torch.native import check_same_kernels
 from skillchain_torch.objectives import SarsaUpdate
 from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy
 from skillchain_torch.rng import CounterRNG
+from skillchain_torch.trainers import native_sarsa
+from skillchain_torch.trainers.kernels import candidate_codes, decide, decision_table
 
-from . import native_sarsa
-from .config import TrainConfig
-from .kernels import candidate_codes, decide, decision_table
+if TYPE_CHECKING:  # the run config is the trainers' (an agent reads only its fields)
+    from skillchain_torch.trainers.config import TrainConfig
 
 __all__ = ["FlatSarsaAgent", "AGENT_STREAM", "BLOCK_DECISIONS"]
 
@@ -81,6 +83,7 @@ class FlatSarsaAgent(nn.Module):
             way agent p of a population equals the single run with seed S + p bit for bit.
 
     Example:
+        >>> from skillchain_torch.trainers import TrainConfig
         >>> agent = FlatSarsaAgent(TrainConfig(runs=2, seed=0))
         >>> agent.q_head.weight.shape
         torch.Size([2, 5, 625])

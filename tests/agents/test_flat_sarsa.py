@@ -10,13 +10,14 @@ import importlib
 import pytest
 import torch
 
+from skillchain_torch.agents import FlatSarsaAgent
+from skillchain_torch.agents.flat_sarsa import BLOCK_DECISIONS
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.objectives import SarsaUpdate
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
-from skillchain_torch.trainers import FlatSarsaAgent, TrainConfig, native_sarsa
-from skillchain_torch.trainers.flat import BLOCK_DECISIONS
+from skillchain_torch.trainers import TrainConfig, native_sarsa
 from skillchain_torch.trainers.kernels import candidate_codes, decision_table
 
 F64 = torch.float64
@@ -31,8 +32,9 @@ def _same_weights(native, got, expected):
 
 
 def test_doctests():
-    for name in ("flat", "agents", "config", "kernels"):
-        module = importlib.import_module(f"skillchain_torch.trainers.{name}")
+    for name in ("skillchain_torch.agents.flat_sarsa", "skillchain_torch.trainers.agents",
+                 "skillchain_torch.trainers.config", "skillchain_torch.trainers.kernels"):
+        module = importlib.import_module(name)
         assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 
 
