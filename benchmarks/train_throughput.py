@@ -35,11 +35,12 @@ import numpy as np
 import torch
 
 from skillchain_torch import rng
+from skillchain_torch.backends import sarsa as native_sarsa
 from skillchain_torch.discovery import native_discovery
 from skillchain_torch.envs.pinball import load_map
 from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
 from skillchain_torch.features import fourier
-from skillchain_torch.trainers import PopulationTrainer, TrainConfig, native_sarsa
+from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
 MAP = "pinball_simple_single"
 

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.backends import sarsa as native_sarsa
 from skillchain_torch.backends.select import compiled
 from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.features import FourierBasis
@@ -47,7 +48,6 @@ from skillchain_torch.native import check_same_kernels
 from skillchain_torch.objectives import SarsaUpdate
 from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy
 from skillchain_torch.rng import CounterRNG
-from skillchain_torch.trainers import native_sarsa
 from skillchain_torch.trainers.kernels import candidate_codes, decide, decision_table
 
 if TYPE_CHECKING:  # the run config is the trainers' (an agent reads only its fields)

@@ -1,4 +1,4 @@
-/* The flat Sarsa agent's per-step arithmetic, compiled (see native_sarsa.py).
+/* The flat Sarsa agent's per-step arithmetic, compiled (see sarsa.py).
  *
  * Why it exists: at P = 100 the torch fast path makes ~20 passes over [P, 625] arrays a step
  * (products, sums, gathers, scatters), and at P = 1 it pays ~30 operations of a few
@@ -130,8 +130,7 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_sarsa_native",
-                                    "Compiled flat Sarsa step (see native_sarsa.py).", -1,
-                                    methods};
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_sarsa",
+                                    "Compiled flat Sarsa step (see sarsa.py).", -1, methods};
 
-PyMODINIT_FUNC PyInit__sarsa_native(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__sarsa(void) { return PyModule_Create(&module); }

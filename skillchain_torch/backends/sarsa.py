@@ -1,6 +1,6 @@
-"""The flat agent's per-step arithmetic in C (``_sarsa_native.c``), on CPU float64 tensors.
+"""The flat agent's per-step arithmetic in C (``_sarsa.c``), on CPU float64 tensors.
 
-:class:`~.flat.FlatSarsaAgent` uses these on the CPU when the extension is built
+:class:`~skillchain_torch.agents.FlatSarsaAgent` uses these on the CPU when the extension is built
 (:data:`AVAILABLE`); they replace the torch fast path of :mod:`.kernels`:
 
 * :func:`linear_q`, :func:`sarsa_learn`, :func:`sarsa_observe`: Q values, the Sarsa update and
@@ -27,7 +27,7 @@ import torch
 from torch import Tensor
 
 try:
-    from . import _sarsa_native as _c
+    from . import _sarsa as _c
 except ImportError:  # built without a C compiler: the agent keeps its torch path
     _c = None
 

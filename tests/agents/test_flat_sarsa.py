@@ -12,12 +12,13 @@ import torch
 
 from skillchain_torch.agents import FlatSarsaAgent
 from skillchain_torch.agents.flat_sarsa import BLOCK_DECISIONS
+from skillchain_torch.backends import sarsa as native_sarsa
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.objectives import SarsaUpdate
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
-from skillchain_torch.trainers import TrainConfig, native_sarsa
+from skillchain_torch.trainers import TrainConfig
 from skillchain_torch.trainers.kernels import candidate_codes, decision_table
 
 F64 = torch.float64
