@@ -23,11 +23,10 @@ found in one pass; the event is resolved and the scan restarts from the next sub
 :class:`~skillchain_torch.envs.pinball.grid.CollisionGrid` first sends balls that cannot meet
 anything during this step down a free-flight path, and gives the others a few candidate edges.
 
-Three paths, one set of bits: on the CPU in float64 every batch goes through the compiled step
-(:mod:`.native`, when ``pip install`` could compile it); without it, batches of up to
-``SCALAR_MAX_BATCH`` balls run in Python floats (:mod:`.scalar`) and larger ones, and every
-batch on other devices, through the tensor code below. Tests step random rollouts through all
-three and compare every bit.
+Two paths, one set of bits: the tensor code below is the definition; on the CPU in float64
+every batch goes through the compiled step instead (:mod:`.native`, the env's documented fast
+path, when ``pip install`` could compile it). Tests step random rollouts and the Java reference
+trajectories through both and compare every bit.
 
 Why no atan2: Java reflects with atan2/cos/sin; the vector form ``v' = 2 (v.e)/(e.e) e - v``
 agrees to ~1e-16 and uses only correctly rounded arithmetic, so a ball's trajectory does not
@@ -45,22 +44,15 @@ import torch
 from . import native
 from .grid import collision_grid
 from .maps import PinballMap
-from .scalar import scalar_board, step_one, substeps
 
 __all__ = ["pinball_step", "pinball_step_events", "NUM_ACTIONS", "ACTION_NAMES", "observation"]
 
 NUM_ACTIONS = 5
 ACTION_NAMES = ("ACC_X", "ACC_Y", "DEC_X", "DEC_Y", "NONE")
 SUBSTEPS = 20
-# Up to this many balls on the CPU, stepping them one by one in Python floats beats torch's
-# per-operation overhead (benchmarks/env_throughput.py measures the crossover).
-SCALAR_MAX_BATCH = 4
 # On the CPU in float64, every batch goes through the compiled step when it was built
 # (native.py: the same bits, ~0.3 us a ball). Tests switch it off to check the other paths.
 NATIVE = native.AVAILABLE
-# After the first vectorised pass, at most this many balls with further events are finished in
-# plain floats rather than by more tensor passes (CPU only).
-CONTINUE_MAX_BALLS = 32
 DRAG = 0.995
 GOAL_REWARD = 10000.0
 THRUST_PENALTY = -5.0
@@ -186,18 +178,15 @@ def _raise_bad_state(i: int, row: list):
 _INT_DTYPES = (torch.int64, torch.int32, torch.int16, torch.int8, torch.uint8)
 
 
-def _step(state, action, pinball_map, with_events: bool, scalar_max_batch: int | None = None):
+def _step(state, action, pinball_map, with_events: bool, compiled: bool = True):
+    """The step; ``compiled=False`` runs the tensor path even where the compiled step could."""
     on_cpu64 = state.device.type == "cpu" and state.dtype == torch.float64
-    if NATIVE and on_cpu64 and scalar_max_batch is None:
+    if compiled and NATIVE and on_cpu64:
         # None for maps with more candidate edges per cell than the C step holds: those take
-        # the Python paths below (the same bits, slower).
+        # the tensor path below (the same bits, slower).
         board = native.board_if_supported(pinball_map)
         if board is not None:
             return _step_native(state, action, pinball_map, board)
-    limit = SCALAR_MAX_BATCH if scalar_max_batch is None else scalar_max_batch
-    if state.shape[0] <= limit and on_cpu64:
-        _check_structure(state, action, pinball_map)
-        return _step_scalar(state, action, pinball_map)
     check_inputs(state, action, pinball_map)
     grid = collision_grid(pinball_map)
     r = pinball_map.ball_radius
@@ -242,25 +231,6 @@ def _step_native(state, action, pinball_map, board=None):
     action = action.to("cpu", torch.long).contiguous()  # C reads it as int64 host memory
     board.step_into(next_state, action, reward, terminated, None, events, check=False)
     return next_state, reward, terminated, events
-
-
-def _step_scalar(state, action, pinball_map):
-    """Tiny CPU batches: one ball at a time in Python floats (bit-identical, see scalar.py)."""
-    board = scalar_board(pinball_map)
-    rows, events = [], []
-    for i, (s, a) in enumerate(zip(state.tolist(), action.tolist(), strict=True)):
-        if not 0 <= a < NUM_ACTIONS:
-            _raise_bad_action(i, a)
-        if not all(map(math.isfinite, s)):
-            _raise_bad_state(i, s)
-        s1, term, ev = step_one(s, a, board)
-        reward = GOAL_REWARD if term else (NONE_PENALTY if a == 4 else THRUST_PENALTY)
-        rows.append((*s1, reward, 1.0 if term else 0.0))
-        events.append(ev)
-    # One tensor, then views: each torch.tensor() call costs more than the physics of a step.
-    out = torch.tensor(rows, dtype=state.dtype).reshape(-1, 6)
-    events = torch.tensor(events, dtype=torch.long).reshape(-1, 4)
-    return out[:, :4], out[:, 4], out[:, 5] > 0.0, events
 
 
 def _flight(p: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
@@ -340,11 +310,6 @@ def _resolve_near(p, v, pinball_map: PinballMap, grid, with_events: bool):
             if with_events:
                 events[:, :3] += counts
             alive = go_on.nonzero()[:, 0]
-            if 0 < alive.numel() <= CONTINUE_MAX_BALLS and device.type == "cpu":
-                # Few balls still have events: another ~90-operation tensor pass per event costs
-                # more than finishing them in plain floats (bit-identical, see scalar.py).
-                _finish_in_floats(alive, p, v, j, terminated, events, cand, pinball_map)
-                break
         else:
             p[alive], v[alive], terminated[alive], j[alive] = pa, va, reached, ja + k + 1
             if with_events:
@@ -362,28 +327,6 @@ def _resolve_near(p, v, pinball_map: PinballMap, grid, with_events: bool):
     v = torch.where(moved[:, None], 0.0, v)
     events[:, 3] += moved.long()
     return p, v, terminated, events
-
-
-def _finish_in_floats(alive, p, v, j, terminated, events, cand, pinball_map) -> None:
-    """Run the remaining substeps of balls ``alive`` one by one, writing results in place."""
-    board = scalar_board(pinball_map)
-    rows = alive.tolist()
-    out_p, out_v, out_t, out_e = [], [], [], []
-    for (x, y), (vx, vy), j0, edges in zip(
-        p[alive].tolist(), v[alive].tolist(), j[alive].tolist(), cand[alive].tolist()
-    ):
-        counts = [0, 0, 0, 0]
-        candidates = [board.edges[i] for i in edges if i >= 0]
-        x, y, vx, vy, reached = substeps(x, y, vx, vy, j0, candidates, board, counts)
-        out_p.append((x, y))
-        out_v.append((vx, vy))
-        out_t.append(reached)
-        out_e.append(counts)
-    index = torch.tensor(rows, dtype=torch.long)
-    p[index] = torch.tensor(out_p, dtype=p.dtype)
-    v[index] = torch.tensor(out_v, dtype=v.dtype)
-    terminated[index] = torch.tensor(out_t, dtype=torch.bool)
-    events[index] += torch.tensor(out_e, dtype=torch.long)
 
 
 def _contacts(positions, v, geo, r: float):
