@@ -1,10 +1,13 @@
 """The physics against the original Java implementation, and its own invariants."""
 
+import doctest
+
 import numpy as np
 import pytest
 import torch
 
 from skillchain_torch.envs.pinball import (
+    collisions,
     load_map,
     native,
     physics,
@@ -19,6 +22,11 @@ VECTOR_FILES = [
     "pinball_hard_single_uniform_s0_k0_stop.npz",
     "pinball_simple_single_goal_mpc_k0_stop.npz",
 ]
+
+
+def test_doctests():
+    for module in (physics, collisions):
+        assert doctest.testmod(module).failed == 0
 
 
 @pytest.fixture(params=["native", "tensor"])
