@@ -2,7 +2,7 @@
 
 * ``envs/pinball/_native.c``: the Pinball step (same bits as the Python-float physics);
 * ``skillchain_torch/features/_fourier_native.c``: FourierBasis's arguments (same bits);
-* ``trainers/_sarsa_native.c``: the flat Sarsa agent's per-step arithmetic;
+* ``skillchain_torch/backends/_sarsa.c``: the flat Sarsa agent's per-step arithmetic;
 * ``skillchain_torch/_rng_native.c``: CounterRNG's draws (same bits);
 * ``skillchain_torch/discovery/_discovery_native.c``: skill chaining's bookkeeping (same bits);
 * ``skillchain_torch/options/_initiation_native.c``: initiation-set memberships and fits;
@@ -40,8 +40,8 @@ setup(
         Extension("skillchain_torch.discovery._discovery_native",
                   sources=["skillchain_torch/discovery/_discovery_native.c"],
                   extra_compile_args=FLAGS, optional=True),
-        Extension("skillchain_torch.trainers._sarsa_native",
-                  sources=["trainers/_sarsa_native.c"], **SHARED),
+        Extension("skillchain_torch.backends._sarsa",
+                  sources=["skillchain_torch/backends/_sarsa.c"], **SHARED),
         Extension("skillchain_torch.options._initiation_native",
                   sources=["skillchain_torch/options/_initiation_native.c"], **SHARED),
         Extension("skillchain_torch.agents._hierarchical_native",

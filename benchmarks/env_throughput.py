@@ -6,11 +6,10 @@ on the batch size; ours steps ``B`` independent environments per call.
 
     python benchmarks/env_throughput.py                 # the table of the README
     python benchmarks/env_throughput.py --torchrl       # also time TorchRL's env.step(td)
-    python benchmarks/env_throughput.py --crossover     # scalar vs tensor path at small B
 
 Columns: ``ours`` is ``PinballEnv.step_raw`` plus ``reset_raw`` of finished environments (what
 the trainers call), through the compiled step when it is built; ``no C`` is the same without
-it (Python floats for tiny batches, tensors otherwise; the same bits); ``torchrl`` is
+it (the tensor path; the same bits); ``torchrl`` is
 ``EnvBase.step`` with TensorDicts; ratios are against pynball-rl's rate measured in the same
 run.
 """
@@ -87,26 +86,8 @@ def main() -> None:
     parser.add_argument("--batches", nargs="+", type=int, default=[1, 64, 1024, 4096])
     parser.add_argument("--budget", type=int, default=200_000, help="env steps per measurement")
     parser.add_argument("--torchrl", action="store_true", help="also time EnvBase.step(td)")
-    parser.add_argument(
-        "--crossover",
-        action="store_true",
-        help="time the plain-float and tensor paths at small batch sizes",
-    )
     args = parser.parse_args()
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, float64, CPU")
-
-    if args.crossover:
-        physics.NATIVE = False
-        print("\n| map | B | plain-float path (steps/s) | tensor path (steps/s) |")
-        print("|---|---:|---:|---:|")
-        for map_name in args.maps:
-            for batch in (1, 2, 4, 8, 16, 32, 64):
-                rates = []
-                for limit in (10**9, 0):
-                    physics.SCALAR_MAX_BATCH = limit
-                    rates.append(time_ours(map_name, batch, steps_for(batch, 20_000)))
-                print(f"| {map_name} | {batch} | {rates[0]:,.0f} | {rates[1]:,.0f} |")
-        return
 
     header = "| map | B | ours (steps/s) | no C (steps/s) | pynball-rl (steps/s) | ratio |"
     sep = "|---|---:|---:|---:|---:|---:|"

@@ -8,9 +8,10 @@ update together).
 Rows: ``PopulationTrainer`` with P agents on pinball_simple_single (paper defaults: order-4
 Fourier basis, alpha 0.001, gamma 1, epsilon 0.01) timed over a fixed number of agent steps
 after a short warm-up; agent steps per second count every agent's environment step with its
-decision and Sarsa update. The peer is a plain per-step NumPy loop of the same agent and the
-same physics (``scalar.step_one``), one agent, written below as one would write it by hand;
-ratios are ours / peer, measured in the same invocation.
+decision and Sarsa update. The peer is a plain per-step NumPy loop of the same agent, one agent,
+written below as one would write it by hand, around pynball-rl's pure-Python simulator (the
+bench extra, ``pip install -e ".[bench]"``; the peer is left out without it); ratios are ours /
+peer, measured in the same invocation.
 
 The skill-chaining rows time agents with options live against flat agents of the same
 population size and the same kind (compiled kernels, the default, or torch only), in
@@ -29,17 +30,19 @@ import itertools
 import math
 import statistics
 import time
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from skillchain_torch import rng
+from skillchain_torch.backends import sarsa as native_sarsa
 from skillchain_torch.discovery import native_discovery
-from skillchain_torch.envs.pinball import load_map
-from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
+from skillchain_torch.envs.pinball import native as pinball_native
+from skillchain_torch.envs.pinball import physics
 from skillchain_torch.features import fourier
-from skillchain_torch.trainers import PopulationTrainer, TrainConfig, native_sarsa
+from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
 MAP = "pinball_simple_single"
 
@@ -62,29 +65,31 @@ def time_trainer(population: int, agent_steps: int, threads: int, repeats: int =
 
 @contextlib.contextmanager
 def compiled_same_bits(on: bool):
-    """The compiled pieces that give the torch path's bits on or off (global switches):
-    FourierBasis's arguments, CounterRNG's draws, skill chaining's bookkeeping."""
-    saved = fourier.NATIVE, rng.NATIVE, native_discovery.NATIVE
+    """The compiled pieces that give the torch path's bits on or off (global switches): the
+    Pinball step, FourierBasis's arguments, CounterRNG's draws, skill chaining's bookkeeping."""
+    saved = physics.NATIVE, fourier.NATIVE, rng.NATIVE, native_discovery.NATIVE
+    physics.NATIVE = on and pinball_native.AVAILABLE
     fourier.NATIVE = on and fourier._fourier_native is not None
     rng.NATIVE = on and rng._rng_native is not None
     native_discovery.NATIVE = on and native_discovery._c is not None
     try:
         yield
     finally:
-        fourier.NATIVE, rng.NATIVE, native_discovery.NATIVE = saved
+        physics.NATIVE, fourier.NATIVE, rng.NATIVE, native_discovery.NATIVE = saved
 
 
 class NumpySarsa:
-    """The peer: one flat Sarsa agent in NumPy, stepping the physics one call at a time."""
+    """The peer: one flat Sarsa agent in NumPy, stepping pynball-rl's simulator (the first
+    instance's map) one call at a time."""
 
     def __init__(self, order=4, alpha=0.001, gamma=1.0, epsilon=0.01, seed=0):
+        from pynball_rl import PynBall  # the bench extra
+
         self.c = np.array(list(itertools.product(range(order + 1), repeat=4)), dtype=float)
         self.w = np.zeros((5, self.c.shape[0]))
         self.alpha, self.gamma, self.epsilon = alpha, gamma, epsilon
         self.rng = np.random.default_rng(seed)
-        pinball_map = load_map(MAP)
-        self.board = scalar_board(pinball_map)
-        self.start = tuple(pinball_map.starts[0].tolist()) + (0.0, 0.0)
+        self.env = PynBall(resources.files("pynball_rl") / "configs" / "easy_config.toml")
 
     def features(self, s):
         x, y, vx, vy = s
@@ -97,17 +102,16 @@ class NumpySarsa:
         return int(best[self.rng.integers(best.size)])
 
     def run(self, steps: int) -> float:
-        s = self.start
+        s = self.env.reset()
         phi = self.features(s)
         a = self.act(self.w @ phi)
         begin = time.perf_counter()
         for _ in range(steps):
-            s, terminated, _ = step_one(s, a, self.board)
-            reward = 10000.0 if terminated else (-1.0 if a == 4 else -5.0)
+            s, reward, terminated, _ = self.env.step(a)
             if terminated:
                 delta = reward - self.w[a] @ phi
                 self.w[a] += self.alpha * delta * phi
-                s = self.start
+                s = self.env.reset()
                 phi = self.features(s)
                 a = self.act(self.w @ phi)
                 continue
@@ -195,7 +199,10 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
-    peer = max(NumpySarsa(seed=r).run(args.steps // 2) for r in range(2))
+    try:
+        peer = max(NumpySarsa(seed=r).run(args.steps // 2) for r in range(2))
+    except ModuleNotFoundError:  # pynball-rl (the bench extra) is not installed: no peer
+        peer = math.nan
     print(f"flat Sarsa on {MAP}, torch {torch.__version__}, {args.threads} thread(s); "
           f"{args.steps:,} agent steps per row (best of 3)")
     print("compiled: the default (every compiled piece: Pinball step, Fourier arguments, random "

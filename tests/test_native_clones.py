@@ -22,14 +22,15 @@ import pytest
 import torch
 
 from skillchain_torch.agents import SkillChainingAgent, native_hierarchical
+from skillchain_torch.backends import sarsa as native_sarsa
 from skillchain_torch.options import OptionBank, native_initiation
-from skillchain_torch.trainers import PopulationTrainer, TrainConfig, native_sarsa
+from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 KERNELS = {  # module holding the compiled handle -> its source
     native_initiation: "skillchain_torch/options/_initiation_native.c",
     native_hierarchical: "skillchain_torch/agents/_hierarchical_native.c",
-    native_sarsa: "trainers/_sarsa_native.c",
+    native_sarsa: "skillchain_torch/backends/_sarsa.c",
 }
 COMPILER = shutil.which(sysconfig.get_config_var("CC").split()[0] if sysconfig.get_config_var(
     "CC") else "cc")  # fmt: skip

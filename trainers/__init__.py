@@ -28,7 +28,6 @@ _EXPORTS = {
     "save_checkpoint": "checkpoint",
     "TrainConfig": "config",
     "paper_defaults": "config",
-    "FlatSarsaAgent": "flat",
     "TensorBoardHook": "logging",
     "ProgressBar": "progress",
     "plot_learning_curve": "plots",

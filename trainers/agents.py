@@ -1,10 +1,12 @@
 """The agent registry: ``--agent NAME`` -> a class built as ``cls(config, device=...)``.
 
 Adding an agent type is one entry here; the CLI's ``--agent`` choices and
-:class:`TrainConfig` validation read this dict. Entries are ``"module:Class"`` paths inside
-this package, imported on first use (so listing the choices does not import torch).
+:class:`TrainConfig` validation read this dict. Entries are ``"module:Class"`` paths (a dotted
+module path is absolute, a bare name is a module of this package), imported on first use (so
+listing the choices does not import torch).
 
-An agent follows the episode protocol of :class:`~.flat.FlatSarsaAgent`: ``begin``,
+An agent follows the episode protocol of
+:class:`~skillchain_torch.agents.flat_sarsa.FlatSarsaAgent`: ``begin``,
 ``observe``, ``observe_ends``, ``compact``, ``actions``, ``index``, ``flush``, ``state_dict`` and
 ``load_state_dict``.
 
@@ -23,7 +25,7 @@ import inspect
 __all__ = ["AGENTS", "agent_class", "make_agent"]
 
 AGENTS: dict[str, str] = {
-    "flat": "flat:FlatSarsaAgent",
+    "flat": "skillchain_torch.agents.flat_sarsa:FlatSarsaAgent",
     "given-options": "given_options:GivenOptionsAgent",
     "skill-chaining": "skill_chaining:SkillChainingRunAgent",
 }
@@ -35,7 +37,8 @@ def agent_class(name: str) -> type:
         module, cls = AGENTS[name].split(":")
     except KeyError:
         raise ValueError(f"unknown agent {name!r}; known agents: {', '.join(AGENTS)}") from None
-    return getattr(importlib.import_module(f"{__package__}.{module}"), cls)
+    return getattr(importlib.import_module(module if "." in module else f"{__package__}.{module}"),
+                   cls)
 
 
 def make_agent(config, device=None, native: bool | None = None):

@@ -77,9 +77,9 @@ class DivergenceCheck:
                 return t[ids:ids + 1]
             return t.index_select(0, ids.to(t.device))
 
-        work = getattr(agent, "_work", None)  # the flat agent's working rows [D, n, F]
-        if rows is not None and work is not None:
-            top = work.w.index_select(1, rows).transpose(0, 1)
+        working = getattr(agent, "working_weights", None)  # the flat agent's, without a flush
+        if rows is not None and working is not None:
+            top = working(rows)
         else:
             top = [pick(t) for t in _per_agent(agent.q_head, agent.population)]
         learners = [("the top-level Q-head", f"lower --alpha (now {cfg.alpha:g})",

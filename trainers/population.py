@@ -44,7 +44,7 @@ import torch
 
 from skillchain_torch.envs.external import make_env, read_specs
 from skillchain_torch.envs.pinball import PinballEnv
-from skillchain_torch.envs.pinball.stepper import SCALAR_MAX, ActiveEnvStepper
+from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
 
 from .agents import make_agent
 from .config import TrainConfig
@@ -91,17 +91,16 @@ class PopulationTrainer(DivergenceCheck):
     Args:
         config: the run (validated; ``order``/``alpha`` resolved to the paper's values).
         out_dir: where checkpoints go (``out_dir/checkpoints``); ``None``: no checkpoints.
-        scalar_max: without the compiled step, the active-set size up to which the physics
-            runs in Python floats.
         native: the compiled code (default: when built, on the CPU): the Pinball step, which
-            gives the same bits as the Python paths (:class:`ActiveEnvStepper`), and the flat
+            gives the same bits as its tensor path (:class:`ActiveEnvStepper`), and the flat
             agent's kernels, which agree with its torch path to rounding
-            (:class:`~.flat.FlatSarsaAgent`). ``False`` runs torch and Python only.
+            (:class:`~skillchain_torch.agents.FlatSarsaAgent`). ``False`` runs torch and Python
+            only.
         num_threads: torch intra-op threads while :meth:`train` runs (restored afterwards);
             ``None`` keeps torch's setting. Default 1: the per-step tensors are small, and a
             parallel region waits for a busy core (10x slowdowns on a shared machine).
         agent: an agent object of your own composition (``config.runs`` agents, the episode
-            protocol of :class:`~.flat.FlatSarsaAgent`, e.g. a
+            protocol of :class:`~skillchain_torch.agents.FlatSarsaAgent`, e.g. a
             :class:`~skillchain_torch.agents.SkillChainingAgent` with your own pieces);
             ``None`` builds ``config.agent`` by name.
 
@@ -114,8 +113,7 @@ class PopulationTrainer(DivergenceCheck):
     """
 
     def __init__(self, config: TrainConfig, out_dir: str | Path | None = None,
-                 scalar_max: int = SCALAR_MAX, num_threads: int | None = 1,
-                 native: bool | None = None, agent=None):
+                 num_threads: int | None = 1, native: bool | None = None, agent=None):
         if config.env is not None:  # the env's sizes from its specs, before the defaults
             envs = [make_env(config.env) for _ in range(config.runs)]
             sizes = read_specs(envs[0], config.obs_bounds)
@@ -129,7 +127,7 @@ class PopulationTrainer(DivergenceCheck):
             self.env = PinballEnv(config.map, batch_size=[config.runs], device=self.device,
                                   dtype=torch.float64, max_episode_steps=config.max_episode_steps,
                                   seed=config.seed)  # fmt: skip
-            self.stepper = ActiveEnvStepper(self.env, scalar_max=scalar_max, native=native)
+            self.stepper = ActiveEnvStepper(self.env, native=native)
         else:
             self.env = envs
             self.stepper = EnvStepper(envs, sizes, seed=config.seed,

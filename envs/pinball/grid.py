@@ -55,8 +55,7 @@ _PAIR_CHUNK = 1 << 18
 # Bytes per stored (cell, edge) entry at the build's peak: the pairs kept as int32 (8, twice
 # while the chunks are joined), the sort's indices (8) and its scratch, and the final int64
 # list (8); measured peaks stay below this (benchmarks/collision_grid_memory.py). Per edge:
-# geometry, the Python-float and compiled boards (scalar.py, native.py); per cell: clearance
-# and offsets.
+# geometry and the compiled board (native.py); per cell: clearance and offsets.
 _BYTES_PER_ENTRY = 40
 _BYTES_PER_EDGE = 400
 _BYTES_PER_CELL = 32
@@ -280,8 +279,8 @@ class CollisionGrid:
         """Whether a ball with squared speed ``vv`` in a cell of this ``clearance`` flies free.
 
         Free flight travels ``|v| r`` per step; the test compares squares (no sqrt) with a
-        relative margin, and works on floats and tensors alike, so the scalar and batched
-        paths decide identically.
+        relative margin, and works on floats and tensors alike (the compiled step makes the
+        same comparison), so every path decides identically.
         """
         c = clearance - 1e-12
         return (c > 0.0) & (c * c > vv * _RR_MARGIN * (r * r))

@@ -1,10 +1,11 @@
-"""The compiled Pinball step: :func:`~.scalar.step_one` in C, for a whole CPU batch in one call.
+"""The compiled Pinball step: the env's documented fast path, a whole CPU batch in one call.
 
-``pip install`` compiles ``_native.c`` when a C compiler is present (``setup.py``). It performs
-the same IEEE-double operations in the same order as the Python-float step, so trajectories are
-bit-identical to it and to the batched torch path (``tests/envs/test_native.py``); only the
-speed differs (well under a microsecond a ball, against 15-20 us in Python floats). Without
-the extension, :data:`AVAILABLE` is False and the physics keeps its Python paths.
+``pip install`` compiles ``_native.c`` when a C compiler is present (``setup.py``). It steps one
+ball at a time through the substeps with the same IEEE-double operations, in the same order,
+as the tensor path of :mod:`.physics` (the definition), so trajectories are bit-identical to it
+(``tests/envs/test_native.py``, ``tests/envs/test_physics.py``); only the speed differs (well
+under a microsecond a ball). Without the extension, :data:`AVAILABLE` is False and the physics
+runs its tensor path.
 
 Example:
     >>> import torch
@@ -28,12 +29,12 @@ import weakref
 import torch
 from torch import Tensor
 
+from .grid import collision_grid
 from .maps import PinballMap
-from .scalar import scalar_board
 
 try:
     from . import _native
-except ImportError:  # built without a C compiler: the Python paths take over
+except ImportError:  # built without a C compiler: the tensor path takes over
     _native = None
 
 __all__ = ["AVAILABLE", "NativeBoard", "native_board"]
@@ -42,45 +43,48 @@ AVAILABLE = _native is not None
 # The C candidate list has room for this many edges per grid cell.
 _MAX_CANDIDATES = 256
 if AVAILABLE:
-    # The same constant as scalar.py's, computed by Python's math so the bits agree.
+    # cos(pi / 1.99)^2 (physics.py's approaching test), computed once by Python's math.
     _native.set_cos2_approach(math.cos(math.pi / 1.99) ** 2)
 
 
 class NativeBoard:
     """A map's edges and collision grid as flat CPU arrays, and the compiled step over them.
 
-    Built from :func:`~.scalar.scalar_board`, whose Python floats (edge vectors, squared
-    lengths, clearances) it copies bit for bit.
+    Built from the map's :class:`~.grid.CollisionGrid`, whose edge geometry (edge vectors and
+    squared lengths, as the tensor path computes them) and clearances it copies bit for bit.
     """
 
     def __init__(self, pinball_map: PinballMap):
         if not AVAILABLE:
             raise RuntimeError(
                 "the compiled Pinball step is not built (no C compiler at install time); "
-                "reinstall with gcc available, or use pinball_step's Python paths"
+                "reinstall with gcc available, or use pinball_step's tensor path"
             )
-        sb = scalar_board(pinball_map)
         f64 = torch.float64
-        grid = sb.grid
+        grid = collision_grid(pinball_map)
         most = _most_candidates(grid)
         if most > _MAX_CANDIDATES:
             raise ValueError(
                 f"a grid cell of map {pinball_map.name!r} has {most} candidate edges; the "
-                f"compiled step holds at most {_MAX_CANDIDATES} (pinball_step uses its Python "
-                "paths for such maps)"
+                f"compiled step holds at most {_MAX_CANDIDATES} (pinball_step uses its tensor "
+                "path for such maps)"
             )
-        self.edges = torch.tensor([list(e) for e in sb.edges], dtype=f64).reshape(-1, 6)
+        # Per edge: ax, ay, ex, ey, |e|^2 (the grid's geometry, without its padding row) and
+        # the polygon it belongs to.
+        self.edges = torch.cat([grid.edge_geometry[:-1].to("cpu", f64),
+                                grid.edge_polygon[:-1].to("cpu", f64)[:, None]], -1).contiguous()
         # The grid's own lists (CSR, int64), shared rather than copied: on large maps they are
         # the biggest structure. cell_ids ends with a -1 that no cell's range reaches.
         self.cell_start = grid.cell_start.to("cpu").contiguous()
         self.cell_ids = grid.cell_ids.to("cpu").contiguous()
         self.clearance = grid.clearance.to("cpu", f64).contiguous()
+        tr = pinball_map.target_radius
         self.params = torch.tensor(
             [
-                sb.r,
-                sb.target[0],
-                sb.target[1],
-                sb.target_r2,
+                pinball_map.ball_radius,
+                pinball_map.target[0],
+                pinball_map.target[1],
+                tr * tr,
                 grid.cell_size,
                 float(grid.resolution),
                 float(self.edges.shape[0]),
@@ -129,7 +133,7 @@ class NativeBoard:
             0 if events is None else events.data_ptr(),
             *self._board_args,
         )
-        if out < 0:  # the same errors as pinball_step's other paths
+        if out < 0:  # the same errors as pinball_step's tensor path
             from .physics import _raise_bad_action, _raise_bad_state  # (physics imports us)
 
             i = -out - 1
@@ -189,7 +193,7 @@ def native_board(pinball_map: PinballMap) -> NativeBoard:
 def board_if_supported(pinball_map: PinballMap) -> NativeBoard | None:
     """The cached :class:`NativeBoard` of ``pinball_map``, or ``None`` if the compiled step
     cannot hold the map (a grid cell with more than 256 candidate edges: dense maps of
-    thousands of edges), which then has to take the Python paths, or is not built.
+    thousands of edges), which then has to take the tensor path, or is not built.
 
     Example:
         >>> from skillchain_torch.envs.pinball import load_map
@@ -200,7 +204,7 @@ def board_if_supported(pinball_map: PinballMap) -> NativeBoard | None:
         return None
     board = _CACHE.get(pinball_map)
     if board is None:
-        if _most_candidates(scalar_board(pinball_map).grid) > _MAX_CANDIDATES:
+        if _most_candidates(collision_grid(pinball_map)) > _MAX_CANDIDATES:
             board = _UNSUPPORTED
         else:
             board = NativeBoard(pinball_map)

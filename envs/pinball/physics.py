@@ -16,58 +16,36 @@ by one step of actions ``[B]`` exactly as ``PinBall.step`` does (see ``PHYSICS.m
 * otherwise drag 0.995 once per step, then the out-of-bounds fallback (x > 1 -> 0.95,
   x < 0 -> 0.05, likewise y, velocity set to 0).
 
-Why the code does not look like the Java loop: substeps are processed *event to event*. From a
-ball's current substep, the positions of all remaining substeps under constant velocity are one
-``cumsum`` (bit-identical to repeated ``p += d``); the first substep with a contact or the goal is
-found in one pass; the event is resolved and the scan restarts from the next substep. A
-:class:`~skillchain_torch.envs.pinball.grid.CollisionGrid` first sends balls that cannot meet
-anything during this step down a free-flight path, and gives the others a few candidate edges.
+A :class:`~skillchain_torch.envs.pinball.grid.CollisionGrid` sends balls that cannot meet
+anything during this step down a free-flight path; the others run their substeps event to event
+(:mod:`.collisions`, which also says why the code does not look like the Java loop).
 
-Three paths, one set of bits: on the CPU in float64 every batch goes through the compiled step
-(:mod:`.native`, when ``pip install`` could compile it); without it, batches of up to
-``SCALAR_MAX_BATCH`` balls run in Python floats (:mod:`.scalar`) and larger ones, and every
-batch on other devices, through the tensor code below. Tests step random rollouts through all
-three and compare every bit.
-
-Why no atan2: Java reflects with atan2/cos/sin; the vector form ``v' = 2 (v.e)/(e.e) e - v``
-agrees to ~1e-16 and uses only correctly rounded arithmetic, so a ball's trajectory does not
-depend on which batch it is in (torch's vectorised atan2 differs in the last bit between SIMD
-lanes and the scalar tail). The approaching test likewise compares a dot product with
-``cos(pi/1.99)``.
+Two paths, one set of bits: the tensor code below is the definition; on the CPU in float64
+every batch goes through the compiled step instead (:mod:`.native`, the env's documented fast
+path, when ``pip install`` could compile it). Tests step random rollouts and the Java reference
+trajectories through both and compare every bit.
 """
 
 from __future__ import annotations
 
-import math
-
 import torch
 
 from . import native
+from .collisions import SUBSTEPS, flight, resolve_near
 from .grid import collision_grid
 from .maps import PinballMap
-from .scalar import scalar_board, step_one, substeps
 
 __all__ = ["pinball_step", "pinball_step_events", "NUM_ACTIONS", "ACTION_NAMES", "observation"]
 
 NUM_ACTIONS = 5
 ACTION_NAMES = ("ACC_X", "ACC_Y", "DEC_X", "DEC_Y", "NONE")
-SUBSTEPS = 20
-# Up to this many balls on the CPU, stepping them one by one in Python floats beats torch's
-# per-operation overhead (benchmarks/env_throughput.py measures the crossover).
-SCALAR_MAX_BATCH = 4
 # On the CPU in float64, every batch goes through the compiled step when it was built
 # (native.py: the same bits, ~0.3 us a ball). Tests switch it off to check the other paths.
 NATIVE = native.AVAILABLE
-# After the first vectorised pass, at most this many balls with further events are finished in
-# plain floats rather than by more tensor passes (CPU only).
-CONTINUE_MAX_BALLS = 32
 DRAG = 0.995
 GOAL_REWARD = 10000.0
 THRUST_PENALTY = -5.0
 NONE_PENALTY = -1.0
-# The Java approaching test accepts an edge when angle(c - p, v) <= pi / 1.99.
-_COS_APPROACH = math.cos(math.pi / 1.99)
-_COS2_APPROACH = _COS_APPROACH * _COS_APPROACH
 # (dx, dy) of each action: +x, +y, -x, -y, none. The impulse is this / 5.
 _IMPULSE = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0), (0.0, 0.0))
 
@@ -186,18 +164,15 @@ def _raise_bad_state(i: int, row: list):
 _INT_DTYPES = (torch.int64, torch.int32, torch.int16, torch.int8, torch.uint8)
 
 
-def _step(state, action, pinball_map, with_events: bool, scalar_max_batch: int | None = None):
+def _step(state, action, pinball_map, with_events: bool, compiled: bool = True):
+    """The step; ``compiled=False`` runs the tensor path even where the compiled step could."""
     on_cpu64 = state.device.type == "cpu" and state.dtype == torch.float64
-    if NATIVE and on_cpu64 and scalar_max_batch is None:
+    if compiled and NATIVE and on_cpu64:
         # None for maps with more candidate edges per cell than the C step holds: those take
-        # the Python paths below (the same bits, slower).
+        # the tensor path below (the same bits, slower).
         board = native.board_if_supported(pinball_map)
         if board is not None:
             return _step_native(state, action, pinball_map, board)
-    limit = SCALAR_MAX_BATCH if scalar_max_batch is None else scalar_max_batch
-    if state.shape[0] <= limit and on_cpu64:
-        _check_structure(state, action, pinball_map)
-        return _step_scalar(state, action, pinball_map)
     check_inputs(state, action, pinball_map)
     grid = collision_grid(pinball_map)
     r = pinball_map.ball_radius
@@ -206,7 +181,7 @@ def _step(state, action, pinball_map, with_events: bool, scalar_max_batch: int |
     p = state[:, :2]
     v = (state[:, 2:] + impulse[action] / 5.0).clamp(-1.0, 1.0)  # Java: v += d / 5; clip
     d = v * r / SUBSTEPS
-    free_end = _flight(p, d)[:, -1]
+    free_end = flight(p, d)[:, -1]
 
     vv = v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1]
     near = ~grid.is_free(grid.clearance.to(state.dtype)[grid.cell_index(p)], vv, r)
@@ -217,7 +192,8 @@ def _step(state, action, pinball_map, with_events: bool, scalar_max_batch: int |
     events = torch.zeros(state.shape[0], 4, dtype=torch.long, device=state.device)
     if bool(near.any()):
         idx = near.nonzero()[:, 0]
-        p_n, v_n, term_n, ev_n = _resolve_near(p[idx], v[idx], pinball_map, grid, with_events)
+        p_n, v_n, term_n, ev_n = _drag_and_bounds(
+            *resolve_near(p[idx], v[idx], pinball_map, grid, with_events))
         next_p = next_p.index_put((idx,), p_n)
         next_v = next_v.index_put((idx,), v_n)
         terminated = terminated.index_put((idx,), term_n)
@@ -244,116 +220,8 @@ def _step_native(state, action, pinball_map, board=None):
     return next_state, reward, terminated, events
 
 
-def _step_scalar(state, action, pinball_map):
-    """Tiny CPU batches: one ball at a time in Python floats (bit-identical, see scalar.py)."""
-    board = scalar_board(pinball_map)
-    rows, events = [], []
-    for i, (s, a) in enumerate(zip(state.tolist(), action.tolist(), strict=True)):
-        if not 0 <= a < NUM_ACTIONS:
-            _raise_bad_action(i, a)
-        if not all(map(math.isfinite, s)):
-            _raise_bad_state(i, s)
-        s1, term, ev = step_one(s, a, board)
-        reward = GOAL_REWARD if term else (NONE_PENALTY if a == 4 else THRUST_PENALTY)
-        rows.append((*s1, reward, 1.0 if term else 0.0))
-        events.append(ev)
-    # One tensor, then views: each torch.tensor() call costs more than the physics of a step.
-    out = torch.tensor(rows, dtype=state.dtype).reshape(-1, 6)
-    events = torch.tensor(events, dtype=torch.long).reshape(-1, 4)
-    return out[:, :4], out[:, 4], out[:, 5] > 0.0, events
-
-
-def _flight(p: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
-    """Positions after each of 20 substeps of constant displacement: ``[B, 20, 2]``.
-
-    A cumsum over ``[p, d, d, ...]`` adds left to right, so it equals Java's repeated ``p += d``
-    bit for bit.
-    """
-    steps = torch.cat([p[:, None, :], d[:, None, :].expand(-1, SUBSTEPS, -1)], dim=1)
-    return torch.cumsum(steps, dim=1)[:, 1:]
-
-
-def _resolve_near(p, v, pinball_map: PinballMap, grid, with_events: bool):
-    """Run one step event to event for balls near something; returns (p, v, terminated, events).
-
-    ``v`` is the velocity after the impulse and clip. Drag and the bounds check are applied
-    here for balls that did not reach the goal.
-    """
-    m, device = p.shape[0], p.device
-    r = pinball_map.ball_radius
-    tx, ty = pinball_map.target
-    big_r2 = pinball_map.target_radius * pinball_map.target_radius
-    # Candidate edges of the start cell, fixed for the step (the grid's reach covers it).
-    # Padding (-1) picks the table's last row, an edge far away that never touches.
-    cand = grid.candidates(grid.cell_index(p))  # [m, K]
-    geometry = grid.edge_geometry.to(p.dtype)[cand]  # [m, K, 5]: ax, ay, ex, ey, |e|^2
-    polygon = grid.edge_polygon[cand]  # [m, K]
-
-    j = torch.zeros(m, dtype=torch.long, device=device)  # substeps done
-    terminated = torch.zeros(m, dtype=torch.bool, device=device)
-    events = torch.zeros(m, 4, dtype=torch.long, device=device)
-    substep = torch.arange(SUBSTEPS, device=device)
-    alive = None  # None: every ball (saves the gathers on the first, largest pass)
-    while True:
-        pa, va, ja, geo, poly = (
-            (p, v, j, geometry, polygon)
-            if alive is None
-            else (p[alive], v[alive], j[alive], geometry[alive], polygon[alive])
-        )
-        n = pa.shape[0]
-        positions = _flight(pa, va * r / SUBSTEPS)  # [n, 20, 2]
-        contact = _contacts(positions, va, geo, r)  # [n, 20, K]
-        gx, gy = positions[..., 0] - tx, positions[..., 1] - ty
-        event = (contact.any(-1) | (gx * gx + gy * gy < big_r2)) & (
-            ja[:, None] + substep < SUBSTEPS
-        )
-        has_event = event.any(-1)
-        # First event substep, or the last substep of the step for balls without one.
-        k = torch.where(has_event, event.to(torch.int8).argmax(-1), SUBSTEPS - 1 - ja)
-        rows = torch.arange(n, device=device)
-        pa = positions[rows, k]
-        hit = contact[rows, k] & has_event[:, None]  # [n, K]
-        n_edges = hit.sum(-1)
-        # One contacting edge: reflect about it; two or more (one polygon or several): reverse.
-        e = geo[rows, hit.to(torch.int8).argmax(-1)]  # [n, 5]
-        scale = 2.0 * (va[:, 0] * e[:, 2] + va[:, 1] * e[:, 3]) / e[:, 4]
-        reflected = torch.stack([scale * e[:, 2] - va[:, 0], scale * e[:, 3] - va[:, 1]], -1)
-        va = torch.where(
-            (n_edges == 1)[:, None], reflected, torch.where((n_edges > 1)[:, None], -va, va)
-        )
-        hit_poly = torch.where(hit, poly, -1).amax(-1)  # (Tensor.max(dim) on int64: ~10 ms!)
-        one_polygon = (n_edges > 0) & (
-            torch.where(hit, poly, hit_poly[:, None]) == hit_poly[:, None]
-        ).all(-1)
-        # One extra substep after a single-polygon bounce on the last substep.
-        extra = one_polygon & (ja + k == SUBSTEPS - 1)
-        pa = torch.where(extra[:, None], pa + va * r / SUBSTEPS, pa)
-        gx, gy = pa[:, 0] - tx, pa[:, 1] - ty
-        reached = has_event & (gx * gx + gy * gy < big_r2)
-        go_on = has_event & ~reached & (ja + k + 1 < SUBSTEPS)
-        if with_events:
-            counts = torch.stack(
-                [n_edges == 1, one_polygon & (n_edges > 1), (n_edges > 0) & ~one_polygon], -1
-            ).long()
-        if alive is None:
-            p, v, terminated, j = pa, va, reached, ja + k + 1
-            if with_events:
-                events[:, :3] += counts
-            alive = go_on.nonzero()[:, 0]
-            if 0 < alive.numel() <= CONTINUE_MAX_BALLS and device.type == "cpu":
-                # Few balls still have events: another ~90-operation tensor pass per event costs
-                # more than finishing them in plain floats (bit-identical, see scalar.py).
-                _finish_in_floats(alive, p, v, j, terminated, events, cand, pinball_map)
-                break
-        else:
-            p[alive], v[alive], terminated[alive], j[alive] = pa, va, reached, ja + k + 1
-            if with_events:
-                events[alive, :3] += counts
-            alive = alive[go_on]
-        if alive.numel() == 0:
-            break
-
-    # Drag once per step, then the out-of-bounds fallback, for balls still in play.
+def _drag_and_bounds(p, v, terminated, events):
+    """Drag once per step, then the out-of-bounds fallback, for near balls still in play."""
     playing = ~terminated[:, None]
     v = torch.where(playing, v * DRAG, v)
     high, low = (p > 1.0) & playing, (p < 0.0) & playing
@@ -362,47 +230,3 @@ def _resolve_near(p, v, pinball_map: PinballMap, grid, with_events: bool):
     v = torch.where(moved[:, None], 0.0, v)
     events[:, 3] += moved.long()
     return p, v, terminated, events
-
-
-def _finish_in_floats(alive, p, v, j, terminated, events, cand, pinball_map) -> None:
-    """Run the remaining substeps of balls ``alive`` one by one, writing results in place."""
-    board = scalar_board(pinball_map)
-    rows = alive.tolist()
-    out_p, out_v, out_t, out_e = [], [], [], []
-    for (x, y), (vx, vy), j0, edges in zip(
-        p[alive].tolist(), v[alive].tolist(), j[alive].tolist(), cand[alive].tolist()
-    ):
-        counts = [0, 0, 0, 0]
-        candidates = [board.edges[i] for i in edges if i >= 0]
-        x, y, vx, vy, reached = substeps(x, y, vx, vy, j0, candidates, board, counts)
-        out_p.append((x, y))
-        out_v.append((vx, vy))
-        out_t.append(reached)
-        out_e.append(counts)
-    index = torch.tensor(rows, dtype=torch.long)
-    p[index] = torch.tensor(out_p, dtype=p.dtype)
-    v[index] = torch.tensor(out_v, dtype=v.dtype)
-    terminated[index] = torch.tensor(out_t, dtype=torch.bool)
-    events[index] += torch.tensor(out_e, dtype=torch.long)
-
-
-def _contacts(positions, v, geo, r: float):
-    """Which candidate edges each substep position touches while approaching: ``[n, 20, K]``.
-
-    Java's tests: the closest point ``c`` of the segment is within ``r`` (inclusive), and the
-    angle between ``c - p`` and ``v`` is at most pi/1.99. ``cos(pi/1.99) < 0``, so the angle
-    test is ``toward >= 0`` or ``toward^2 <= cos^2 |c - p|^2 |v|^2`` (squares, no sqrt, so the
-    decision cannot depend on the SIMD lane a ball lands in).
-    """
-    px, py = positions[..., 0:1], positions[..., 1:2]  # [n, 20, 1]
-    ax, ay, ex, ey, ee = (geo[:, None, :, i] for i in range(5))  # [n, 1, K]
-    t = (((px - ax) * ex + (py - ay) * ey) / ee).clamp(0.0, 1.0)
-    dx = px - (ax + ex * t)
-    dy = py - (ay + ey * t)
-    dist2 = dx * dx + dy * dy
-    vx, vy = v[:, 0, None, None], v[:, 1, None, None]
-    toward = -(dx * vx + dy * vy)
-    approaching = (toward >= 0.0) | (
-        toward * toward <= _COS2_APPROACH * dist2 * (vx * vx + vy * vy)
-    )
-    return (dist2 <= r * r) & approaching

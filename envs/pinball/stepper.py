@@ -5,10 +5,8 @@ population have finished their episodes that wastes most of a step, so the train
 *active* environments only, in compact rows (row ``i`` is environment ``index[i]``), through the
 same pure physics the env uses: on the CPU in float64 the compiled step
 (:mod:`~skillchain_torch.envs.pinball.native`, one call for all active balls, writing the
-observations too); without it :func:`~skillchain_torch.envs.pinball.pinball_step`, or
-:func:`~skillchain_torch.envs.pinball.scalar.step_one` one ball at a time in Python floats for
-small active sets, where torch's per-operation overhead would dominate. All paths
-are bit-identical to ``step_raw`` ball by ball, so an environment's trajectory does not depend on
+observations too); otherwise :func:`~skillchain_torch.envs.pinball.pinball_step`. Both are
+bit-identical to ``step_raw`` ball by ball, so an environment's trajectory does not depend on
 which others are active (``tests/trainers/test_stepper.py`` checks it against ``step_raw``).
 
 Starts are drawn by ``env.reset_raw`` (the env's own per-environment stream). The compact state
@@ -24,21 +22,13 @@ code outside :class:`PinballEnv` that touches the env's simulator holder (``env.
 
 from __future__ import annotations
 
-from array import array
-
 import torch
 from torch import Tensor
 
 from skillchain_torch.envs.pinball import native as _native
 from skillchain_torch.envs.pinball import observation, pinball_step
-from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
 
-__all__ = ["ActiveEnvStepper", "SCALAR_MAX"]
-
-# Up to this many active balls (CPU, float64) the Python-float physics beats the batched
-# kernel's fixed cost per step (benchmarks/train_throughput.py; ~20 us per ball).
-SCALAR_MAX = 128
-_GOAL, _NONE, _THRUST = 10000.0, -1.0, -5.0
+__all__ = ["ActiveEnvStepper"]
 
 
 class ActiveEnvStepper:
@@ -46,12 +36,10 @@ class ActiveEnvStepper:
 
     Args:
         env: a ``PinballEnv`` with ``batch_size=[P]``.
-        scalar_max: without the compiled step, use the Python-float physics while at most
-            this many rows are active (CPU and float64 only).
-        native: use the compiled step (default: whenever it is built and the env is on the
-            CPU in float64). ``False`` steps up to ``scalar_max`` rows in Python floats and
-            larger sets through ``pinball_step``, which on the CPU itself takes the compiled
-            step when built (``physics.NATIVE``). Every path gives the same bits.
+        native: call the compiled step directly (default: whenever it is built and the env is
+            on the CPU in float64). ``False`` steps through ``pinball_step``, which on the CPU
+            itself takes the compiled step when built (``physics.NATIVE``). Every path gives
+            the same bits.
 
     Example:
         >>> from skillchain_torch.envs.pinball.env import PinballEnv
@@ -63,7 +51,7 @@ class ActiveEnvStepper:
         ([-5.0, -1.0, -5.0], None)
     """
 
-    def __init__(self, env, scalar_max: int = SCALAR_MAX, native: bool | None = None):
+    def __init__(self, env, native: bool | None = None):
         self.env = env
         self.population = int(env.num_envs)
         self.max_episode_steps = env.max_episode_steps
@@ -79,44 +67,14 @@ class ActiveEnvStepper:
                 f"{_native.AVAILABLE}) and a CPU float64 env (got {self._device}, {env.dtype})"
             )
         self._native = _native.native_board(self.pinball_map) if native else None
-        self._scalar_ok = cpu64 and self._native is None
-        self.scalar_max = int(scalar_max)
         self.index = torch.arange(self.population, device=self._device)
-        self._state = self._sim.state.clone()  # [n, 4] (batched mode)
-        self._rows: list | None = None  # list of 4-tuples (scalar mode)
+        self._state = self._sim.state.clone()  # [n, 4]
         self._count = self._sim.step_count.clone()  # steps in the current episode, [n]
-        self._board = scalar_board(self.pinball_map) if self._scalar_ok else None
-        self._choose_mode()
 
     # ------------------------------------------------------------------ modes
     @property
     def num_active(self) -> int:
         return int(self.index.numel())
-
-    @property
-    def scalar(self) -> bool:
-        return self._rows is not None
-
-    def _choose_mode(self) -> None:
-        want_scalar = self._scalar_ok and self.num_active <= self.scalar_max
-        if want_scalar and self._rows is None:
-            self._rows = [tuple(r) for r in self._state.tolist()]
-            self._count_list = self._count.tolist()
-        elif not want_scalar and self._rows is not None:
-            self._state = self._tensor_state()
-            self._count = torch.tensor(self._count_list, dtype=torch.long, device=self._device)
-            self._rows = None
-
-    def _tensor_state(self) -> Tensor:
-        if self._rows is None:
-            return self._state
-        state = torch.tensor(self._rows, dtype=self.env.dtype, device=self._device)
-        return state.reshape(-1, 4)
-
-    def _tensor_count(self) -> Tensor:
-        if self._rows is None:
-            return self._count
-        return torch.tensor(self._count_list, dtype=torch.long, device=self._device)
 
     # ------------------------------------------------------------------ episodes
     def start(self) -> Tensor:
@@ -125,8 +83,6 @@ class ActiveEnvStepper:
         self.index = torch.arange(self.population, device=self._device)
         self._state = self._sim.state.clone()
         self._count = torch.zeros(self.population, dtype=torch.long, device=self._device)
-        self._rows = None
-        self._choose_mode()
         return obs.reshape(self.population, 4)
 
     def step(self, action: Tensor):
@@ -137,8 +93,6 @@ class ActiveEnvStepper:
         """
         if self._native is not None:
             return self._step_native(action)
-        if self._rows is not None:
-            return self._step_scalar(action)
         state, reward, terminated = pinball_step(self._state, action, self.pinball_map)
         self._state = state
         return observation(state), reward, self._ends(terminated, bool(terminated.any()))
@@ -169,49 +123,14 @@ class ActiveEnvStepper:
         n_goal = self._native.step_into(state, action, reward, terminated, obs, check=False)
         return obs, reward, self._ends(terminated, n_goal > 0)
 
-    def _step_scalar(self, action: Tensor):
-        board, rows, out = self._board, self._rows, []
-        any_term = False
-        terms = []
-        for i, a in enumerate(action.tolist()):
-            (x, y, vx, vy), term, _ = step_one(rows[i], a, board)
-            rows[i] = (x, y, vx, vy)
-            reward = _GOAL if term else (_NONE if a == 4 else _THRUST)
-            out += (x, y, (vx + 1.0) / 2.0, (vy + 1.0) / 2.0, reward)
-            terms.append(term)
-            any_term |= term
-        counts = self._count_list
-        for i in range(len(counts)):
-            counts[i] += 1
-        limit = self.max_episode_steps
-        truncs = None
-        if limit is not None:
-            truncs = [c >= limit and not t for c, t in zip(counts, terms)]
-        # A flat array of doubles read in place: a quarter of torch.tensor's cost on nested
-        # tuples, which showed at P = 1 (~10 us a step).
-        # (The Python-float path only runs in float64.)
-        buf = torch.frombuffer(array("d", out), dtype=torch.float64).reshape(-1, 5)
-        obs, reward = buf[:, :4], buf[:, 4]
-        if not (any_term or (truncs is not None and any(truncs))):
-            return obs, reward, None
-        terminated = torch.tensor(terms, dtype=torch.bool)
-        truncated = torch.tensor(truncs or [False] * len(terms), dtype=torch.bool)
-        return obs, reward, (terminated, truncated)
-
     def reset(self, rows: Tensor) -> Tensor:
         """Restart the environments in compact ``rows``; their observations ``[len(rows), 4]``."""
         envs = self.index[rows]
         mask = torch.zeros(self.population, dtype=torch.bool, device=self._device)
         mask[envs] = True
         obs = self.env.reset_raw(mask).reshape(self.population, 4)[envs]
-        fresh = self._sim.state[envs]
-        if self._rows is not None:
-            for i, s in zip(rows.tolist(), fresh.tolist()):
-                self._rows[i] = tuple(s)
-                self._count_list[i] = 0
-        else:
-            self._state[rows] = fresh
-            self._count[rows] = 0
+        self._state[rows] = self._sim.state[envs]
+        self._count[rows] = 0
         return obs
 
     def compact(self, keep: Tensor) -> None:
@@ -226,24 +145,18 @@ class ActiveEnvStepper:
         sim.done = done
         keep_rows = keep.nonzero().flatten()
         self.index = self.index[keep_rows]
-        if self._rows is not None:
-            kept = keep_rows.tolist()
-            self._rows = [self._rows[i] for i in kept]
-            self._count_list = [self._count_list[i] for i in kept]
-        else:
-            self._state = self._state[keep_rows]
-            self._count = self._count[keep_rows]
-        self._choose_mode()
+        self._state = self._state[keep_rows]
+        self._count = self._count[keep_rows]
 
     # ------------------------------------------------------------------ state
     def sync(self) -> None:
         """Write the active rows' states and step counters back into the env."""
         sim = self._sim
         state = sim.state.clone()
-        state[self.index] = self._tensor_state()
+        state[self.index] = self._state
         sim.state = state
         count = sim.step_count.clone()
-        count[self.index] = self._tensor_count()
+        count[self.index] = self._count
         sim.step_count = count
         done = sim.done.clone()
         done[self.index] = False  # episode ends are handled (restarted) within the same step
@@ -273,5 +186,3 @@ class ActiveEnvStepper:
         self.index = state["index"].to(dev).clone()
         self._state = sim.state[self.index].clone()
         self._count = sim.step_count[self.index].clone()
-        self._rows = None
-        self._choose_mode()

@@ -36,7 +36,7 @@ observe = flat.observe
 def traced(obs, reward):
     if trainer.episodes_done[0] != episode - 1:
         return observe(obs, reward)
-    q = flat.q_values(flat.featurize(obs))[:, 0]  # before this step's update
+    q = flat.q_values(flat.featurize(obs))[0]  # before this step's update (Q of each action)
     action = observe(obs, reward)
     rows.append([*obs[0].tolist(), float(reward[0]), *q.tolist(), int(action[0])])
     return action

@@ -1,10 +1,13 @@
-"""Agents built from the library's pieces: the hierarchical (options) agent and helpers.
+"""Agents built from the library's pieces: the flat baseline, the hierarchical (options) agent
+and helpers.
 
+- :class:`FlatSarsaAgent`: the paper's baseline, Sarsa over primitive actions only.
 - :class:`HierarchicalAgent`: SMDP Sarsa over primitives + options, intra-option Q-learning.
 - :class:`SkillChainingAgent`: the same agent discovering its options by skill chaining.
 - :func:`make_region_option`: a hand-built "reach the target region" option bank.
 """
 
+from skillchain_torch.agents.flat_sarsa import FlatSarsaAgent
 from skillchain_torch.agents.hierarchical import (
     MAX_OPTION_STEPS,
     NUM_PRIMITIVES,
@@ -13,6 +16,7 @@ from skillchain_torch.agents.hierarchical import (
 from skillchain_torch.agents.skill_chaining import SkillChainingAgent
 
 __all__ = [
+    "FlatSarsaAgent",
     "HierarchicalAgent",
     "MAX_OPTION_STEPS",
     "NUM_PRIMITIVES",

@@ -6,8 +6,9 @@ piece it replaces is *exactly* the built-in class (not a subclass), on the CPU i
 built; otherwise the torch path runs, and asking for the kernel anyway is a ``ValueError``
 naming the piece.
 
-The kernels themselves sit beside the modules they serve (``*_native.c`` with their glue,
-``native_*.py``); they take declared tensors.
+Most kernels still sit beside the modules they serve (``*_native.c`` with their glue,
+``native_*.py``); the flat Sarsa step is here (:mod:`.sarsa` over ``_sarsa.c``). They take
+declared tensors.
 """
 
 from skillchain_torch.backends.select import builtin_type_problems, compiled

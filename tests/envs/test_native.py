@@ -1,4 +1,4 @@
-"""The compiled Pinball step against the Python-float step it transcribes, bit for bit."""
+"""The compiled Pinball step against the tensor path it transcribes, bit for bit."""
 
 import doctest
 import os
@@ -6,8 +6,7 @@ import os
 import pytest
 import torch
 
-from skillchain_torch.envs.pinball import MAP_NAMES, load_map, native
-from skillchain_torch.envs.pinball.scalar import scalar_board, step_one
+from skillchain_torch.envs.pinball import MAP_NAMES, load_map, native, physics
 
 needs_native = pytest.mark.skipif(
     not native.AVAILABLE, reason="the compiled step was not built (no C compiler at install time)"
@@ -26,29 +25,28 @@ def test_doctests():
 
 @needs_native
 @pytest.mark.parametrize("map_name", MAP_NAMES)
-def test_random_rollouts_match_step_one(map_name):
-    """64 balls anywhere on the board, 600 random actions; every bit and event count agrees."""
+def test_random_rollouts_match_the_tensor_path(map_name):
+    """64 balls anywhere on the board, 600 random actions; every bit and event count agrees
+    with the tensor path (the definition)."""
     m = load_map(map_name)
-    board, nb = scalar_board(m), native.native_board(m)
+    nb = native.native_board(m)
     gen = torch.Generator().manual_seed(3)
     state = torch.rand(64, 4, generator=gen, dtype=torch.float64)
     state[:, 2:] = state[:, 2:] * 2.0 - 1.0
-    rows = [tuple(r) for r in state.tolist()]
-    start = (0.2, 0.9, 0.0, 0.0)
+    ref = state.clone()
+    start = torch.tensor([0.2, 0.9, 0.0, 0.0], dtype=torch.float64)
     total = torch.zeros(4, dtype=torch.long)
     for _ in range(600):
         action = torch.randint(0, 5, (64,), generator=gen)
         events = torch.empty(64, 4, dtype=torch.long)
         reward, terminated, n_goal = nb.step(state, action, events=events)
-        for i, a in enumerate(action.tolist()):
-            rows[i], term, ev = step_one(rows[i], a, board)
-            assert term == bool(terminated[i]) and ev == events[i].tolist()
-            assert reward[i].item() == (10000.0 if term else (-1.0 if a == 4 else -5.0))
-            if term:
-                rows[i] = start
+        ref, ref_reward, ref_terminated, ref_events = physics._step(ref, action, m, True,
+                                                                    compiled=False)
+        assert torch.equal(state, ref) and torch.equal(reward, ref_reward)
+        assert torch.equal(terminated, ref_terminated) and torch.equal(events, ref_events)
         assert n_goal == int(terminated.sum())
-        state[terminated] = torch.tensor(start, dtype=torch.float64)
-        assert torch.equal(state, torch.tensor(rows, dtype=torch.float64))
+        state[terminated] = start
+        ref = state.clone()
         total += events.sum(0)
     assert total[0] > 100  # the rollouts bounced
 

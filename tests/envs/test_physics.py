@@ -1,10 +1,13 @@
 """The physics against the original Java implementation, and its own invariants."""
 
+import doctest
+
 import numpy as np
 import pytest
 import torch
 
 from skillchain_torch.envs.pinball import (
+    collisions,
     load_map,
     native,
     physics,
@@ -21,13 +24,17 @@ VECTOR_FILES = [
 ]
 
 
-@pytest.fixture(params=["native", "scalar", "batched"])
+def test_doctests():
+    for module in (physics, collisions):
+        assert doctest.testmod(module).failed == 0
+
+
+@pytest.fixture(params=["native", "tensor"])
 def path(request, monkeypatch):
-    """Run a test through the compiled step, the plain-float path and the tensor path."""
+    """Run a test through the compiled step and the tensor path."""
     if request.param == "native" and not native.AVAILABLE:
         pytest.skip("the compiled step was not built (no C compiler at install time)")
     monkeypatch.setattr(physics, "NATIVE", request.param == "native")
-    monkeypatch.setattr(physics, "SCALAR_MAX_BATCH", 10**9 if request.param == "scalar" else 0)
     return request.param
 
 
@@ -55,7 +62,6 @@ def test_reproduces_java_trajectory(name, vectors_dir, path):
 def test_reproduces_java_trajectories_as_one_batch(config, vectors_dir, monkeypatch):
     """The tensor path: a map's files stepped together (each ball idles once its file ends)."""
     monkeypatch.setattr(physics, "NATIVE", False)
-    monkeypatch.setattr(physics, "SCALAR_MAX_BATCH", 0)
     refs = [np.load(vectors_dir / n) for n in VECTOR_FILES if n.startswith(config + "_")]
     m = load_map(config)
     state = torch.tensor(np.stack([r["states"][0] for r in refs]))
@@ -72,7 +78,7 @@ def test_reproduces_java_trajectories_as_one_batch(config, vectors_dir, monkeypa
     "map_name",
     ["pinball_simple_single", "pinball_hard_two_starts", "pinball_medium", "pinball_box"],
 )
-def test_native_scalar_and_batched_paths_are_bit_identical(map_name):
+def test_native_and_tensor_paths_are_bit_identical(map_name):
     """A ball's trajectory does not depend on the batch it is in (population contract)."""
     m = load_map(map_name)
     gen = torch.Generator().manual_seed(7)
@@ -88,14 +94,11 @@ def test_native_scalar_and_batched_paths_are_bit_identical(map_name):
     total_events = torch.zeros(4, dtype=torch.long)
     for _ in range(200):
         action = torch.randint(0, 5, (batch,), generator=gen)
-        batched = physics._step(state, action, m, True, scalar_max_batch=0)
+        batched = physics._step(state, action, m, True, compiled=False)
         alone = [
-            physics._step(state[i : i + 1], action[i : i + 1], m, True, scalar_max_batch=0)
+            physics._step(state[i : i + 1], action[i : i + 1], m, True, compiled=False)
             for i in range(0, batch, 13)
         ]
-        scalar = physics._step(state, action, m, True, scalar_max_batch=batch)
-        for x, y in zip(batched, scalar):
-            assert torch.equal(x, y)
         if native.AVAILABLE:  # the compiled step, whole batch and one ball
             for x, y in zip(batched, physics._step_native(state, action, m)):
                 assert torch.equal(x, y)

@@ -7,12 +7,13 @@ import numpy as np
 import pytest
 import torch
 
+from skillchain_torch.envs.pinball import physics
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
 
-def _run(runs, seed, scalar_max=128, native=None, **kwargs):
+def _run(runs, seed, native=None, **kwargs):
     cfg = TrainConfig(map="pinball_box", runs=runs, seed=seed, **kwargs)
-    return PopulationTrainer(cfg, scalar_max=scalar_max, native=native).train()
+    return PopulationTrainer(cfg, native=native).train()
 
 
 def test_doctests():
@@ -22,17 +23,20 @@ def test_doctests():
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "scalar_max", "native"),
+    ("kwargs", "native", "tensor_physics"),
     [
-        (dict(episodes=3, max_episode_steps=500), 128, None),  # goals and truncations
-        (dict(episodes=3, max_episode_steps=500), 128, False),  # Python-float physics
-        (dict(episodes=3, max_episode_steps=500), 0, False),  # the tensor physics for P = 3
-        (dict(episodes=2), 128, None),  # terminations only
-        (dict(episodes=2, gamma=0.99, epsilon=0.2, order=3, scale_step_size=True), 128, None),
+        (dict(episodes=3, max_episode_steps=500), None, False),  # goals and truncations
+        (dict(episodes=3, max_episode_steps=500), False, False),  # the torch agent
+        (dict(episodes=3, max_episode_steps=500), False, True),  # ... and the tensor physics
+        (dict(episodes=2), None, False),  # terminations only
+        (dict(episodes=2, gamma=0.99, epsilon=0.2, order=3, scale_step_size=True), None, False),
     ],
 )
-def test_agent_p_equals_single_run_with_seed_s_plus_p(kwargs, scalar_max, native):
-    together = _run(3, seed=10, scalar_max=scalar_max, native=native, **kwargs)
+def test_agent_p_equals_single_run_with_seed_s_plus_p(kwargs, native, tensor_physics,
+                                                       monkeypatch):
+    if tensor_physics:
+        monkeypatch.setattr(physics, "NATIVE", False)
+    together = _run(3, seed=10, native=native, **kwargs)
     for p in range(3):
         alone = _run(1, seed=10 + p, native=native, **kwargs)
         assert np.array_equal(together.returns[p], alone.returns[0])
@@ -43,7 +47,7 @@ def test_agent_p_equals_single_run_with_seed_s_plus_p(kwargs, scalar_max, native
 
 
 def test_large_population_rows_equal_single_runs():
-    """From 16 active rows on, Q is formed one action at a time; the rows must not change."""
+    """A larger population than the others here: its rows must not change either."""
     together = _run(18, seed=0, episodes=2, max_episode_steps=60)
     for p in (0, 9, 17):
         alone = _run(1, seed=p, episodes=2, max_episode_steps=60)

@@ -1,70 +1,86 @@
 """``FlatSarsaAgent``: the paper's baseline without options, for a population of agents.
 
 Sarsa (gamma = 1, epsilon = 0.01) with linear function approximation over a Fourier basis of the
-4-d observation (paper section 5.1). The agent is built from the library's pieces --
-:class:`~skillchain_torch.features.FourierBasis`, :class:`~skillchain_torch.modules.LinearQHead`,
-:class:`~skillchain_torch.policies.EpsilonGreedy`, :class:`~skillchain_torch.objectives.SarsaUpdate`
-and one :class:`~skillchain_torch.rng.CounterRNG` stream per agent -- which hold its parameters and
-state. The per-step hot path (``observe``) evaluates the *same* arithmetic in fewer tensor
-operations (:mod:`.kernels`), on a compact working copy of the agents still training:
+4-d observation (paper section 5.1). The library's pieces hold its parameters and, on the torch
+path, do its arithmetic, one call each per step:
 
-* the working weights are action-major, ``[D, n, F]``, so ``Q = sum_f w * phi`` multiplies
-  contiguous blocks (the sums are the same row sums LinearQHead computes);
-* uniforms are drawn ahead in blocks from each agent's counter (values depend only on the seed
-  and the counter), and the epsilon-greedy choice for each of them is tabulated per possible
-  greedy set (:func:`~.kernels.decision_table`);
-* the update ``delta = (r + gamma Q(s', a')) - Q(s, a)``, ``w[a] += step * (delta * phi)`` keeps
-  :class:`SarsaUpdate`'s expression order.
+* :class:`~skillchain_torch.features.FourierBasis`: ``phi(s')``;
+* :class:`~skillchain_torch.modules.LinearQHead`: ``Q(s', .)``;
+* :func:`~skillchain_torch.policies.epsilon_greedy`: ``a'``, from two uniforms of the agent's
+  :class:`~skillchain_torch.rng.CounterRNG` stream;
+* :class:`~skillchain_torch.objectives.SarsaUpdate`: ``w[a] += step * (delta * phi(s))``
+  toward ``r + gamma Q(s', a')`` (a primitive action lasts one step, ``k = 1``).
 
-On the CPU, when the extension is built, the same steps run in C instead (:mod:`.native_sarsa`,
-``native=True``, the default there): one pass per agent row for Q(s', .), the tabulated choice
-and the update, with dot products summed in an order of its own, so the weights agree with the
-library pieces to rounding rather than bit for bit (the features are FourierBasis's either way).
+The agents still training are compact rows (row i = agent ``index[i]``) of a working
+``LinearQHead``, so a step costs what the active agents cost; :meth:`flush` writes them back
+into ``q_head``. The uniforms are drawn ahead, 64 decisions at a time: each is a pure function
+of the agent's seed and counter, so drawing ahead changes no value.
 
-``tests/trainers/test_flat.py`` checks the torch path against the library pieces bit for bit,
-and the compiled path to 1e-10 with the same decisions.
+On the CPU, when the extension is built, the same steps run in C instead
+(:mod:`skillchain_torch.backends.sarsa`, ``native=True``, the default there): one pass per
+agent row for Q(s', .), the epsilon-greedy rule and the update, with dot products summed in an
+order of their own, so the weights agree with the torch path to rounding rather than bit for
+bit (the features and the random draws are the same either way).
+
+``tests/agents/test_flat_sarsa.py`` checks the torch path against the library pieces driven by
+hand, bit for bit, and the compiled path to 1e-10 with the same decisions.
 
 Episode protocol (driven by the trainer, rows = active agents in ascending id order):
 ``begin(obs)`` picks the first actions; ``observe(obs, reward)`` learns from a step in which no
 episode ended and returns the next actions; ``observe_ends(...)`` does the same when some did
 (terminal updates do not bootstrap, truncated ones do; restarted agents decide at their new start
 state *after* their update); ``compact(keep)`` drops agents that finished all their episodes.
+
+Example:
+    >>> import torch
+    >>> from skillchain_torch.trainers import TrainConfig
+    >>> agent = FlatSarsaAgent(TrainConfig(runs=2, seed=0, alpha=0.1), native=False)
+    >>> obs = torch.tensor([[0.2, 0.9, 0.5, 0.5]] * 2, dtype=torch.float64)
+    >>> agent.begin(obs).tolist()  # all Q = 0: ties broken by each agent's stream
+    [2, 3]
+    >>> agent.observe(obs, torch.tensor([-5.0, -5.0], dtype=torch.float64)).tolist()
+    [4, 2]
+    >>> agent.flush()
+    >>> agent.q_head.weight[:, :, 0].tolist()  # Q(s, a) moved by alpha * (-5) * phi_0 = -0.5
+    [[0.0, 0.0, -0.5, 0.0, 0.0], [0.0, 0.0, 0.0, -0.5, 0.0]]
 """
 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.backends import sarsa as native_sarsa
 from skillchain_torch.backends.select import compiled
 from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
-from skillchain_torch.native import check_same_kernels
+from skillchain_torch.native import check_same_kernels, for_c
 from skillchain_torch.objectives import SarsaUpdate
-from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy
+from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy, epsilon_greedy
 from skillchain_torch.rng import CounterRNG
 
-from . import native_sarsa
-from .config import TrainConfig
-from .kernels import candidate_codes, decide, decision_table
+if TYPE_CHECKING:  # the run config is the trainers' (an agent reads only its fields)
+    from skillchain_torch.trainers.config import TrainConfig
 
 __all__ = ["FlatSarsaAgent", "AGENT_STREAM", "BLOCK_DECISIONS"]
 
 AGENT_STREAM = 0  # the decision stream; the env's start stream uses its own salt
-BLOCK_DECISIONS = 64  # decisions whose uniforms are drawn (and tabulated) ahead per refill
+BLOCK_DECISIONS = 64  # decisions whose uniforms are drawn ahead per refill
 OBS_DIM = 4
-CHUNK_ROWS = 16  # from this many active rows on, Q is formed one action at a time
 
 
 class _Work:
-    """Working state of the active rows (compact, row i = agent ``index[i]``)."""
+    """Working state of the active rows (compact, row i = agent ``index[i]``).
 
-    __slots__ = ("index", "n", "w", "w_flat", "arange", "prod", "phi", "action", "rows", "base",
-                 "j", "table", "table_rows", "explore", "u1", "step_size", "gamma", "epsilon",
-                 "gamma_float")
+    A plain object: setting attributes of an nn.Module costs microseconds, several times a step.
+    """
+
+    __slots__ = ("index", "n", "head", "phi", "action", "available", "one", "never", "base",
+                 "j", "uniforms", "gamma")
 
 
 class FlatSarsaAgent(nn.Module):
@@ -74,19 +90,18 @@ class FlatSarsaAgent(nn.Module):
         config: the run's :class:`TrainConfig` (``order``/``alpha`` resolved to paper values
             when ``None``); ``config.runs`` is the population P.
         device: torch device (default ``config.device``).
-        native: run the per-step arithmetic in C (:mod:`.native_sarsa`; default: when it is
-            built and the agent is on the CPU). Its Q values and updates agree with the torch
-            path to rounding, not bit for bit, so a run's bits depend on this choice (it is
-            saved with the agent's state; a checkpoint of the other kind is refused). Either
-            way agent p of a population equals the single run with seed S + p bit for bit.
+        native: run the per-step arithmetic in C (:mod:`skillchain_torch.backends.sarsa`;
+            default: when it is built and the agent is on the CPU). Its Q values and updates
+            agree with the torch path to rounding, not bit for bit, so a run's bits depend on
+            this choice (it is saved with the agent's state; a checkpoint of the other kind is
+            refused). Either way agent p of a population equals the single run with seed
+            S + p bit for bit.
 
     Example:
+        >>> from skillchain_torch.trainers import TrainConfig
         >>> agent = FlatSarsaAgent(TrainConfig(runs=2, seed=0))
         >>> agent.q_head.weight.shape
         torch.Size([2, 5, 625])
-        >>> obs = torch.tensor([[0.2, 0.9, 0.5, 0.5]] * 2, dtype=torch.float64)
-        >>> agent.begin(obs).tolist()  # all Q = 0: ties broken by each agent's stream
-        [2, 3]
     """
 
     def __init__(self, config: TrainConfig, device: torch.device | str | None = None,
@@ -112,122 +127,110 @@ class FlatSarsaAgent(nn.Module):
         scale = self.features.step_size_scale() if cfg.scale_step_size else None
         self.update = SarsaUpdate(cfg.alpha, cfg.gamma, step_size_scale=scale).to(device)
         self.rng = CounterRNG.from_seed(cfg.seed, cfg.runs, stream=AGENT_STREAM, device=device)
-        self._powers = (2 ** torch.arange(self.num_actions, device=device))[:, None]  # [D, 1]
-        # The hot path's state lives in a plain object: setting attributes of an nn.Module
-        # costs microseconds, several times per step.
         w = self._work = _Work()
-        w.step_size = self.update.step_size
-        w.epsilon = torch.tensor(cfg.epsilon, dtype=torch.float64, device=device)
-        w.gamma = None if cfg.gamma == 1.0 else torch.tensor(cfg.gamma, dtype=torch.float64,
-                                                             device=device)
-        w.gamma_float = None if cfg.gamma == 1.0 else float(cfg.gamma)
+        # The kernel's gamma: None is 1 without a multiplication (SarsaUpdate skips it too).
+        w.gamma = None if cfg.gamma == 1.0 else float(cfg.gamma)
         self._set_active(torch.arange(cfg.runs, device=device))
         w.phi = torch.zeros(cfg.runs, self.features.num_features, dtype=torch.float64,
                             device=device)
-        self._set_action(torch.zeros(cfg.runs, dtype=torch.int64, device=device))
+        w.action = torch.zeros(cfg.runs, dtype=torch.int64, device=device)
 
     # ------------------------------------------------------------------ pieces
     def featurize(self, obs: Tensor) -> Tensor:
         """``FourierBasis(obs)``: ``[n, 4] -> [n, F]``."""
         return self.features(obs)
 
-    def q_values(self, phi: Tensor, rows: Tensor | None = None) -> Tensor:
-        """``LinearQHead.forward`` of the working rows (all, or ``rows``), action-major
-        ``[D, n]``: ``q[d, i] = sum_f w[d, i, f] * phi[i, f]``.
+    def q_values(self, phi: Tensor) -> Tensor:
+        """``Q(s, .)`` of every working row: ``phi [n, F] -> [n, D]``."""
+        head = self._work.head
+        return native_sarsa.linear_q(head.weight, phi) if self.native else head(phi)
 
-        For many rows the products are formed one action at a time, so each block stays in
-        cache between the multiply and the sum (the same row sums, a third of the memory
-        traffic).
-        """
-        w = self._work
+    def _row_values(self, phi: Tensor, rows: Tensor) -> Tensor:
+        """``Q(s, .)`` of the working ``rows`` only, from their features ``phi [n, F]``
+        (the other rows' are not read): ``[len(rows), D]``."""
+        head = self._work.head
         if self.native:
-            return native_sarsa.linear_q(w.w, phi, rows)
-        if rows is not None:
-            return (w.w[:, rows] * phi[None]).sum(-1)
-        if w.n < CHUNK_ROWS:
-            return torch.mul(w.w, phi[None], out=w.prod).sum(-1)
-        q = torch.empty(self.num_actions, w.n, dtype=phi.dtype, device=phi.device)
-        for d in range(self.num_actions):
-            torch.sum(torch.mul(w.w[d], phi, out=w.prod), -1, out=q[d])
-        return q
+            return native_sarsa.linear_q(head.weight, phi[rows], rows)
+        wanted = torch.zeros(head.population, dtype=torch.bool, device=phi.device)
+        wanted[rows] = True
+        return head.forward_rows(phi, wanted)[rows]
 
-    @staticmethod
-    def decide(q: Tensor, explore: Tensor, u1: Tensor) -> Tensor:
-        """Epsilon-greedy of ``q [n, D]`` from explicit uniforms (see :func:`.kernels.decide`)."""
-        return decide(q, explore, u1)
+    def _decide(self, q: Tensor, uniforms: Tensor) -> Tensor:
+        """The epsilon-greedy rule over all actions, for ``q [m, D]`` and ``uniforms [m, 2]``.
 
-    def _decide_slot(self, q: Tensor, rows: Tensor | None = None) -> Tensor:
-        """This step's epsilon-greedy choice from the tabulated slot ``j - 1``: ``[n]``."""
+        ``check=False``: every action is available, and NaN values (diverged weights) are
+        reported by :meth:`_refill` with the agents' ids, not here.
+        """
+        available = self._work.available[: q.shape[0]]
+        return epsilon_greedy(q, available, self.policy.epsilon, uniforms, check=False)
+
+    def _learn(self, reward: Tensor, phi1: Tensor, a1: Tensor, q1: Tensor,
+               terminated: Tensor | None) -> None:  # fmt: skip
+        """One Sarsa step of every working row toward ``r + gamma Q(s', a')`` (no bootstrap
+        where ``terminated``); ``q1 = Q(s', .)`` from the weights before the step."""
         w = self._work
-        code = candidate_codes(q, self._powers)
-        table = w.table[:, w.j - 1]  # [n, 2^D]
-        if rows is None:
-            return table.take(w.table_rows + code)
-        return table[rows].take(w.table_rows[: rows.numel()] + code)
+        q_next = q1.gather(1, a1[:, None])[:, 0]
+        if self.native:
+            native_sarsa.sarsa_learn(w.head.weight, w.phi, w.action, for_c(reward, torch.float64),
+                                     q_next, None if terminated is None else for_c(
+                                         terminated, torch.bool),
+                                     self.update.step_size, w.gamma)  # fmt: skip
+            return
+        self.update(w.head, w.phi, w.action, reward, w.one, phi1, a1,
+                    w.never if terminated is None else terminated, next_value=q_next)
 
-    def _next_slot(self) -> None:
-        """Consume one decision's uniforms (2 per active row)."""
+    def _next_slot(self) -> int:
+        """Consume one decision's uniforms (2 per active row); its slot in ``uniforms``."""
         w = self._work
         if w.j == BLOCK_DECISIONS:
             self._refill(w.base + NUM_UNIFORMS * BLOCK_DECISIONS)
         w.j += 1
+        return w.j - 1
 
     def _refill(self, base: Tensor) -> None:
-        """Draw the next block of uniforms from counters ``base`` and tabulate the decisions."""
+        """Draw the next block of uniforms from counters ``base``: ``[n, 64, 2]``."""
         w = self._work
         w.base, w.j = base, 0
+        weight = w.head.weight
         # One sum is non-finite if any weight is (a pass over the weights, not three); an
         # overflowing sum of finite weights finds no bad agent and raises nothing.
-        if not math.isfinite(float(w.w.sum())):
-            bad = w.index[~torch.isfinite(w.w).flatten(2).all(-1).all(0)].tolist()
+        if not math.isfinite(float(weight.sum())):
+            bad = w.index[~torch.isfinite(weight).flatten(1).all(-1)].tolist()
             if bad:
                 raise FloatingPointError(
                     f"agents {bad} have non-finite weights (alpha too large?)")
         stream = CounterRNG(self.rng.seeds[w.index], self.rng.stream, counter=base)
-        block = stream.uniform(NUM_UNIFORMS * BLOCK_DECISIONS)  # u0, u1, u0, u1, ...
-        w.explore = block[:, 0::2] < w.epsilon
-        w.u1 = block[:, 1::2]
-        w.table = decision_table(w.explore, w.u1, self.num_actions)
+        w.uniforms = stream.uniform(NUM_UNIFORMS * BLOCK_DECISIONS).view(
+            w.n, BLOCK_DECISIONS, NUM_UNIFORMS)  # u0, u1 of each decision
 
     def _counters(self) -> Tensor:
         """Draws consumed so far by the active rows."""
         w = self._work
         return w.base + NUM_UNIFORMS * w.j
 
-    def _set_action(self, action: Tensor) -> None:
-        w = self._work
-        w.action = action
-        w.rows = torch.add(w.arange, action, alpha=w.n)  # row of (action, agent) in w_flat
-
     # ------------------------------------------------------------------ protocol
     def begin(self, obs: Tensor) -> Tensor:
         """First decisions of every active agent at its start observation ``[n, 4]``."""
         w = self._work
         w.phi = self.featurize(obs)
-        self._next_slot()
-        self._set_action(self._decide_slot(self.q_values(w.phi)))
+        slot = self._next_slot()
+        w.action = self._decide(self.q_values(w.phi), w.uniforms[:, slot])
         return w.action
 
     def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
         """Learn from ``(s, a, r, s')`` for every active row (no episode ended); next actions."""
         w = self._work
-        if self.native:  # the whole step per agent row in C
-            phi1 = self.features(obs)
-            self._next_slot()
-            # The C code reads raw memory: rewards as contiguous float64 (a no-op from the
-            # stepper; the Python-float stepper hands a strided column).
-            reward = reward.to(torch.float64).contiguous()
-            a1 = native_sarsa.sarsa_observe(w.w, w.phi, phi1, w.action, reward, w.table,
-                                            w.j - 1, w.step_size, w.gamma_float)
-            w.phi, w.action, w.rows = phi1, a1, None  # rows: only the torch path reads them
-            return a1
         phi1 = self.features(obs)
-        q1 = self.q_values(phi1)
-        self._next_slot()
-        a1 = self._decide_slot(q1)
-        rows1 = torch.add(w.arange, a1, alpha=w.n)
-        self._learn(reward, q1.take(rows1), None)
-        w.phi, w.action, w.rows = phi1, a1, rows1
+        slot = self._next_slot()
+        if self.native:  # the whole step per agent row in C
+            a1 = native_sarsa.sarsa_observe(
+                w.head.weight, w.phi, phi1, w.action, for_c(reward, torch.float64), w.uniforms,
+                slot, self.policy.epsilon, self.update.step_size, w.gamma)  # fmt: skip
+        else:
+            q1 = self.q_values(phi1)
+            a1 = self._decide(q1, w.uniforms[:, slot])
+            self._learn(reward, phi1, a1, q1, None)
+        w.phi, w.action = phi1, a1
         return a1
 
     def observe_ends(
@@ -253,50 +256,30 @@ class FlatSarsaAgent(nn.Module):
         w = self._work
         phi1 = self.features(obs)
         q1 = self.q_values(phi1)
-        self._next_slot()
-        a1 = self._decide_slot(q1)
-        self._learn(reward, q1.take(torch.add(w.arange, a1, alpha=w.n)), terminated)
+        slot = self._next_slot()
+        uniforms = w.uniforms[:, slot]
+        a1 = self._decide(q1, uniforms)
+        self._learn(reward, phi1, a1, q1, terminated)
         if restart_rows.numel() > 0:
+            phi1, a1 = phi1.clone(), a1.clone()
+            phi1[restart_rows] = self.features(start_obs)
+            q_start = self._row_values(phi1, restart_rows)
             # A terminated row's next decision is its start decision: it takes this step's
             # uniforms (its decision at s' above is discarded). A truncated row already used
             # them at s', so its start decision draws two more.
-            phi_start = self.features(start_obs)
-            q_start = self.q_values(phi_start, restart_rows)
-            a_start = self._decide_slot(q_start, restart_rows)
+            a_start = self._decide(q_start, uniforms[restart_rows])
             extra = truncated[restart_rows]
             if bool(extra.any()):
                 counters = self._counters()
                 rows = restart_rows[extra]
                 stream = CounterRNG(self.rng.seeds[w.index[rows]], self.rng.stream,
                                     counter=counters[rows])
-                u = stream.uniform(NUM_UNIFORMS)
-                a_start[extra] = decide(q_start.T[extra], u[:, 0] < w.epsilon, u[:, 1])
+                a_start[extra] = self._decide(q_start[extra], stream.uniform(NUM_UNIFORMS))
                 counters[rows] += NUM_UNIFORMS
                 self._refill(counters)
-            phi1, a1 = phi1.clone(), a1.clone()
-            phi1[restart_rows] = phi_start
             a1[restart_rows] = a_start
-        w.phi = phi1
-        self._set_action(a1)
+        w.phi, w.action = phi1, a1
         return a1
-
-    def _learn(self, reward: Tensor, q_next: Tensor, terminated: Tensor | None) -> None:
-        """One Sarsa step per active row, as ``SarsaUpdate`` computes it."""
-        w = self._work
-        if self.native:
-            terminated = None if terminated is None else terminated.contiguous()
-            reward = reward.to(torch.float64).contiguous()
-            native_sarsa.sarsa_learn(w.w, w.phi, w.action, reward, q_next,
-                                     terminated, w.step_size, w.gamma_float)
-            return
-        w_sa = w.w_flat.index_select(0, w.rows)
-        q_sa = (w_sa * w.phi).sum(-1)
-        bootstrap = q_next if w.gamma is None else w.gamma * q_next  # 1.0 * x == x
-        if terminated is not None:
-            bootstrap = torch.where(terminated, torch.zeros_like(bootstrap), bootstrap)
-        delta = (reward + bootstrap) - q_sa
-        w_sa += w.step_size * (delta[:, None] * w.phi)
-        w.w_flat.index_copy_(0, w.rows, w_sa)
 
     # ------------------------------------------------------------------ active set
     @property
@@ -309,21 +292,28 @@ class FlatSarsaAgent(nn.Module):
         """The current action of each active row ``[n]``."""
         return self._work.action
 
+    def working_weights(self, rows: Tensor) -> Tensor:
+        """The current weights of the active ``rows``, ``[len(rows), D, F]``, without a
+        :meth:`flush` (the trainer's divergence check reads them at episode ends)."""
+        return self._work.head.weight.index_select(0, rows)
+
     def _set_active(self, index: Tensor, base: Tensor | None = None) -> None:
         weight = self.q_head.weight  # [P, D, F]
         w = self._work
-        w.index, w.n = index, int(index.numel())
-        w.w = weight[index].transpose(0, 1).contiguous()  # [D, n, F]
-        w.w_flat = w.w.view(self.num_actions * w.n, weight.shape[-1])
-        w.arange = torch.arange(w.n, device=weight.device)
-        w.table_rows = w.arange * (1 << self.num_actions)
-        w.prod = torch.empty_like(w.w if w.n < CHUNK_ROWS else w.w[0])
+        n, dev = int(index.numel()), weight.device
+        w.index, w.n = index, n
+        w.head = LinearQHead(self.q_head.num_features, self.num_actions, n, dtype=weight.dtype,
+                             device=dev)  # fmt: skip
+        w.head.weight = weight[index]  # a contiguous copy of the rows (the kernels need one)
+        w.available = torch.ones(n, self.num_actions, dtype=torch.bool, device=dev)
+        w.one = torch.ones(n, dtype=torch.int64, device=dev)  # k = 1: primitive actions
+        w.never = torch.zeros(n, dtype=torch.bool, device=dev)
         self._refill(self.rng.counter[index].clone() if base is None else base)
 
     def flush(self) -> None:
         """Write the working rows (weights, stream counters) back into ``q_head`` and ``rng``."""
         w = self._work
-        self.q_head.weight[w.index] = w.w.transpose(0, 1)
+        self.q_head.weight[w.index] = w.head.weight
         counter = self.rng.counter.clone()
         counter[w.index] = self._counters()
         self.rng.counter = counter
@@ -336,8 +326,7 @@ class FlatSarsaAgent(nn.Module):
         counters = self._counters()[rows]
         phi, action = w.phi[rows], w.action[rows]
         self._set_active(w.index[rows], counters)
-        w.phi = phi
-        self._set_action(action)
+        w.phi, w.action = phi, action
 
     # ------------------------------------------------------------------ state
     def state_dict(self, *args, **kwargs):
@@ -368,7 +357,7 @@ class FlatSarsaAgent(nn.Module):
         self._set_active(index)
         w = self._work
         w.phi = state["phi"].to(dev)[index].clone()
-        self._set_action(state["action"].to(dev)[index].clone())
+        w.action = state["action"].to(dev)[index].clone()
 
     def extra_repr(self) -> str:
         cfg = self.config

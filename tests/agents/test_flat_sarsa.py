@@ -1,7 +1,8 @@
-"""FlatSarsaAgent's fast paths against the library pieces.
+"""FlatSarsaAgent against the library pieces driven by hand.
 
-The torch path equals them bit for bit. The compiled path (native_sarsa, when built) takes the
-same decisions and its weights agree to rounding: its dot products sum in their own order.
+The torch path is those pieces, so it equals them bit for bit. The compiled path
+(backends.sarsa, when built) takes the same decisions and its weights agree to rounding: its
+dot products sum in their own order.
 """
 
 import doctest
@@ -10,14 +11,15 @@ import importlib
 import pytest
 import torch
 
+from skillchain_torch.agents import FlatSarsaAgent
+from skillchain_torch.agents.flat_sarsa import BLOCK_DECISIONS
+from skillchain_torch.backends import sarsa as native_sarsa
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.objectives import SarsaUpdate
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.rng import CounterRNG
-from skillchain_torch.trainers import FlatSarsaAgent, TrainConfig, native_sarsa
-from skillchain_torch.trainers.flat import BLOCK_DECISIONS
-from skillchain_torch.trainers.kernels import candidate_codes, decision_table
+from skillchain_torch.trainers import TrainConfig
 
 F64 = torch.float64
 KERNELS = [False, True] if native_sarsa.AVAILABLE else [False]
@@ -31,8 +33,9 @@ def _same_weights(native, got, expected):
 
 
 def test_doctests():
-    for name in ("flat", "agents", "config", "kernels"):
-        module = importlib.import_module(f"skillchain_torch.trainers.{name}")
+    for name in ("skillchain_torch.agents.flat_sarsa", "skillchain_torch.trainers.agents",
+                 "skillchain_torch.trainers.config", "skillchain_torch.backends.sarsa"):
+        module = importlib.import_module(name)
         assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 
 
@@ -51,22 +54,21 @@ def test_featurize_equals_fourier_basis(order, n, native):
     assert torch.equal(agent.featurize(buf[:, :4]), FourierBasis(4, order)(obs))
 
 
+@pytest.mark.skipif(not native_sarsa.AVAILABLE, reason="the compiled kernels were not built")
 @pytest.mark.parametrize("epsilon", [0.0, 0.01, 0.5, 1.0])
-def test_decide_equals_epsilon_greedy(epsilon):
+def test_compiled_decisions_equal_epsilon_greedy(epsilon):
+    """The kernel's choice (native_maths.h's rule) is policies.epsilon_greedy's, ties included."""
     gen = torch.Generator().manual_seed(1)
-    agent = FlatSarsaAgent(TrainConfig(runs=1, epsilon=epsilon))
     n = 500
-    # few distinct values, so many ties
-    q = torch.randint(0, 3, (n, 5), generator=gen).to(F64)
-    u = torch.rand(n, 2, dtype=F64, generator=gen)
-    u[:7, 1] = 1.0 - 2.0**-53  # the largest uniform
-    expected = epsilon_greedy(q, torch.ones(n, 5, dtype=torch.bool), epsilon, u)
-    got = agent.decide(q, u[:, 0] < epsilon, u[:, 1])
+    # Q = w[i, d, 0] * 1: few distinct values, so many ties
+    w = torch.randint(0, 3, (n, 5, 1), generator=gen).to(F64)
+    u = torch.rand(n, 1, 2, dtype=F64, generator=gen)
+    u[:7, 0, 1] = 1.0 - 2.0**-53  # the largest uniform
+    expected = epsilon_greedy(w[:, :, 0], torch.ones(n, 5, dtype=torch.bool), epsilon, u[:, 0])
+    ones, zero = torch.ones(n, 1, dtype=F64), torch.zeros((), dtype=F64)  # step 0: no update
+    got = native_sarsa.sarsa_observe(w, ones, ones, torch.zeros(n, dtype=torch.int64),
+                                     torch.zeros(n, dtype=F64), u, 0, epsilon, zero, None)
     assert torch.equal(got, expected)
-    # the tabulated form: one slot per row, looked up by the greedy set's bit code
-    table = decision_table((u[:, 0] < epsilon)[:, None], u[:, 1:], 5)[:, 0]
-    code = candidate_codes(q.T, (2 ** torch.arange(5))[:, None])
-    assert torch.equal(table.gather(1, code[:, None])[:, 0], expected)
 
 
 def _reference_step(head, update, phi, a, r, next_phi, next_a, terminal):
@@ -198,15 +200,16 @@ def test_state_of_the_other_kernel_is_refused():
 @pytest.mark.skipif(not native_sarsa.AVAILABLE, reason="the compiled kernels were not built")
 def test_native_q_values_agree_with_linear_q_head():
     gen = torch.Generator().manual_seed(4)
-    w = torch.randn(5, 7, 625, dtype=F64, generator=gen)
+    head = LinearQHead(625, 5, 7)
+    head.weight = torch.randn(7, 5, 625, dtype=F64, generator=gen)
     phi = torch.rand(3, 625, dtype=F64, generator=gen)
     rows = torch.tensor([6, 0, 3])
-    expected = (w[:, rows] * phi[None]).sum(-1)
-    torch.testing.assert_close(native_sarsa.linear_q(w, phi, rows), expected,
+    expected = head.weight[rows].mul(phi[:, None]).sum(-1)
+    torch.testing.assert_close(native_sarsa.linear_q(head.weight, phi, rows), expected,
                                rtol=1e-13, atol=1e-12)
     # and not by accident: a row's value does not depend on the other rows asked for
-    assert torch.equal(native_sarsa.linear_q(w, phi[1:2], rows[1:2]),
-                       native_sarsa.linear_q(w, phi, rows)[:, 1:2])
+    assert torch.equal(native_sarsa.linear_q(head.weight, phi[1:2], rows[1:2]),
+                       native_sarsa.linear_q(head.weight, phi, rows)[1:2])
 
 
 @pytest.mark.skipif(not native_sarsa.AVAILABLE, reason="the compiled kernels were not built")

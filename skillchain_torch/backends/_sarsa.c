@@ -1,38 +1,27 @@
-/* The flat Sarsa agent's per-step arithmetic, compiled (see native_sarsa.py).
+/* The flat Sarsa agent's per-step arithmetic, compiled (see sarsa.py).
  *
- * Why it exists: at P = 100 the torch fast path makes ~20 passes over [P, 625] arrays a step
- * (products, sums, gathers, scatters), and at P = 1 it pays ~30 operations of a few
+ * Why it exists: at P = 100 the torch path makes ~20 passes over [P, 625] arrays a step
+ * (products, sums, gathers, scatters), and at P = 1 it pays ~40 operations of a few
  * microseconds each. Here each agent's row is one pass: its Q values, its epsilon-greedy
- * lookup, its Sarsa update.
+ * decision, its Sarsa update.
  *
- * Arithmetic: the features come from FourierBasis. Dot products are native_maths.h's (a fixed
- * order of their own: deterministic, independent of the batch, not torch's bits). The update
- * keeps SarsaUpdate's expression: w[a] += step * (delta * phi), delta = (r + gamma q') - q.
- * Compiled with -ffp-contract=off: no fused multiply-adds.
+ * Arithmetic: the features come from FourierBasis. Dot products and the epsilon-greedy rule are
+ * native_maths.h's (the dot products in a fixed order of their own: deterministic, independent
+ * of the batch, not torch's bits; the rule is policies/epsilon_greedy.py's, decision for
+ * decision). The update keeps SarsaUpdate's expression: w[a] += step * (delta * phi),
+ * delta = (r + gamma q') - q. Compiled with -ffp-contract=off: no fused multiply-adds.
  *
- * Every array argument is an address (torch.Tensor.data_ptr()); all arrays are contiguous.
+ * Weights are agent-major [n, D, F] (the agent's working LinearQHead). Every array argument is
+ * an address (torch.Tensor.data_ptr()); all arrays are contiguous.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
 #include <stdint.h>
 
-#include "native_maths.h"  /* dot */
+#include "native_maths.h"  /* dot, epsilon_greedy */
 
 #define MAX_DECISIONS 16
-
-/* Bit code of the greedy decisions (q == max q); 0 when any value is NaN (as torch's amax). */
-static long greedy_code(const double *q, long d_count)
-{
-    double m = q[0];
-    for (long d = 1; d < d_count; d++)
-        if (q[d] > m || isnan(q[d])) m = q[d];
-    if (isnan(m)) return 0;
-    long code = 0;
-    for (long d = 0; d < d_count; d++)
-        if (q[d] == m) code |= 1L << d;
-    return code;
-}
 
 /* w[a] += step * (delta * phi), delta = (r + boot) - w[a] . phi */
 static void learn_row(double *wa, const double *phi, long F, double reward, double q_next,
@@ -45,13 +34,13 @@ static void learn_row(double *wa, const double *phi, long F, double reward, doub
     for (long f = 0; f < F; f++) wa[f] += step[f * step_stride] * (delta * phi[f]);
 }
 
-/* linear_q(n, D, F, w, n_rows, rows, phi, q): q[d, i] = w[d, r_i] . phi[i], with r_i = rows[i]
- * (or i when rows is 0). w is action-major [D, n_rows, F]; q is [D, n]. */
+/* linear_q(n, D, F, w, rows, phi, q): q[i, d] = w[r_i, d] . phi[i], with r_i = rows[i] (or i
+ * when rows is 0). w is [N, D, F]; q is [n, D]. */
 NATIVE_CLONES static PyObject *linear_q(PyObject *self, PyObject *args)
 {
-    Py_ssize_t n, D, F, n_rows;
+    Py_ssize_t n, D, F;
     unsigned long long w_p, rows_p, phi_p, q_p;
-    if (!PyArg_ParseTuple(args, "nnnKnKKK", &n, &D, &F, &w_p, &n_rows, &rows_p, &phi_p, &q_p))
+    if (!PyArg_ParseTuple(args, "nnnKKKK", &n, &D, &F, &w_p, &rows_p, &phi_p, &q_p))
         return NULL;
     const double *w = (const double *)(uintptr_t)w_p, *phi = (const double *)(uintptr_t)phi_p;
     const int64_t *rows = (const int64_t *)(uintptr_t)rows_p;
@@ -59,7 +48,7 @@ NATIVE_CLONES static PyObject *linear_q(PyObject *self, PyObject *args)
     for (Py_ssize_t i = 0; i < n; i++) {
         long r = rows ? (long)rows[i] : (long)i;
         for (Py_ssize_t d = 0; d < D; d++)
-            q[d * n + i] = dot(w + (d * n_rows + r) * F, phi + i * F, F);
+            q[i * D + d] = dot(w + (r * D + d) * F, phi + i * F, F);
     }
     Py_RETURN_NONE;
 }
@@ -81,24 +70,25 @@ NATIVE_CLONES static PyObject *sarsa_learn(PyObject *self, PyObject *args)
     const int64_t *action = (const int64_t *)(uintptr_t)a_p;
     const uint8_t *terminated = (const uint8_t *)(uintptr_t)t_p;
     for (Py_ssize_t i = 0; i < n; i++)
-        learn_row(w + (action[i] * n + i) * F, phi + i * F, F, reward[i], q_next[i],
+        learn_row(w + (i * D + action[i]) * F, phi + i * F, F, reward[i], q_next[i],
                   terminated ? terminated[i] : 0, step, step_stride, gamma, use_gamma);
     Py_RETURN_NONE;
 }
 
-/* sarsa_observe(n, D, F, w, phi, phi_next, action, reward, table, table_row, slot, step,
- * step_stride, gamma, use_gamma, next_action): for each row, Q(s', .) with the weights before
- * this step's update, the tabulated epsilon-greedy choice a' (table[i*table_row + slot + code]),
- * then the Sarsa update of (s, a) toward r + gamma Q(s', a'). Writes a' to next_action. */
+/* sarsa_observe(n, D, F, w, phi, phi_next, action, reward, uniforms, u_stride, u_offset,
+ * epsilon, step, step_stride, gamma, use_gamma, next_action): for each row, Q(s', .) with the
+ * weights before this step's update, the epsilon-greedy choice a' from the row's uniforms
+ * (u0, u1) = uniforms[i * u_stride + u_offset + (0, 1)], then the Sarsa update of (s, a) toward
+ * r + gamma Q(s', a'). Writes a' to next_action. */
 NATIVE_CLONES static PyObject *sarsa_observe(PyObject *self, PyObject *args)
 {
-    Py_ssize_t n, D, F, table_row, slot, step_stride;
-    unsigned long long w_p, phi_p, phi1_p, a_p, r_p, table_p, step_p, out_p;
-    double gamma;
+    Py_ssize_t n, D, F, u_stride, u_offset, step_stride;
+    unsigned long long w_p, phi_p, phi1_p, a_p, r_p, u_p, step_p, out_p;
+    double epsilon, gamma;
     int use_gamma;
-    if (!PyArg_ParseTuple(args, "nnnKKKKKKnnKndiK", &n, &D, &F, &w_p, &phi_p, &phi1_p, &a_p,
-                          &r_p, &table_p, &table_row, &slot, &step_p, &step_stride, &gamma,
-                          &use_gamma, &out_p))
+    if (!PyArg_ParseTuple(args, "nnnKKKKKKnndKndiK", &n, &D, &F, &w_p, &phi_p, &phi1_p, &a_p,
+                          &r_p, &u_p, &u_stride, &u_offset, &epsilon, &step_p, &step_stride,
+                          &gamma, &use_gamma, &out_p))
         return NULL;
     if (D > MAX_DECISIONS) {
         PyErr_SetString(PyExc_ValueError, "sarsa_observe: at most 16 decisions");
@@ -108,30 +98,30 @@ NATIVE_CLONES static PyObject *sarsa_observe(PyObject *self, PyObject *args)
     const double *phi = (const double *)(uintptr_t)phi_p;
     const double *phi1 = (const double *)(uintptr_t)phi1_p;
     const double *reward = (const double *)(uintptr_t)r_p, *step = (const double *)(uintptr_t)step_p;
+    const double *uniforms = (const double *)(uintptr_t)u_p;
     const int64_t *action = (const int64_t *)(uintptr_t)a_p;
-    const int64_t *table = (const int64_t *)(uintptr_t)table_p;
     int64_t *next_action = (int64_t *)(uintptr_t)out_p;
     double q[MAX_DECISIONS];
     for (Py_ssize_t i = 0; i < n; i++) {
-        const double *p1 = phi1 + i * F;
-        for (Py_ssize_t d = 0; d < D; d++) q[d] = dot(w + (d * n + i) * F, p1, F);
-        int64_t a1 = table[i * table_row + slot + greedy_code(q, D)];
-        learn_row(w + (action[i] * n + i) * F, phi + i * F, F, reward[i], q[a1], 0, step,
-                  step_stride, gamma, use_gamma);
+        const double *p1 = phi1 + i * F, *u = uniforms + i * u_stride + u_offset;
+        double *wi = w + i * D * F;
+        for (Py_ssize_t d = 0; d < D; d++) q[d] = dot(wi + d * F, p1, F);
+        int64_t a1 = epsilon_greedy(q, NULL, D, epsilon, u[0], u[1]);
+        learn_row(wi + action[i] * F, phi + i * F, F, reward[i], q[a1], 0, step, step_stride,
+                  gamma, use_gamma);
         next_action[i] = a1;
     }
     Py_RETURN_NONE;
 }
 
 static PyMethodDef methods[] = {
-    {"linear_q", linear_q, METH_VARARGS, "Action-major Q values of some rows."},
+    {"linear_q", linear_q, METH_VARARGS, "Q values of some rows."},
     {"sarsa_learn", sarsa_learn, METH_VARARGS, "One Sarsa update per row."},
     {"sarsa_observe", sarsa_observe, METH_VARARGS, "Q(s', .), the choice a', the update."},
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_sarsa_native",
-                                    "Compiled flat Sarsa step (see native_sarsa.py).", -1,
-                                    methods};
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_sarsa",
+                                    "Compiled flat Sarsa step (see sarsa.py).", -1, methods};
 
-PyMODINIT_FUNC PyInit__sarsa_native(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__sarsa(void) { return PyModule_Create(&module); }
