@@ -150,12 +150,14 @@ def parse_map(text: str, source: str) -> dict:
         elif kind == "polygon":
             n = len(points)
             for j in range(n):
-                # A repeated vertex gives a zero-length edge, and the closest-point test of
-                # the collision code would divide by its zero length.
-                if points[j] == points[(j + 1) % n]:
+                # The closest-point test of the collision code divides by an edge's squared
+                # length: a repeated vertex, or two closer than about 1e-154 (the square
+                # underflows to 0), would divide by zero.
+                (x0, y0), (x1, y1) = points[j], points[(j + 1) % n]
+                if (x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0) == 0.0:
                     at.fail(
                         f"'polygon' vertices {j + 1} and {(j + 1) % n + 1} coincide "
-                        f"{points[j]!r} (zero-length edge)"
+                        f"{points[j]!r}, {points[(j + 1) % n]!r} (zero-length edge)"
                     )
             polygons.append(points)
             polygon_lines.append(lineno)

@@ -373,3 +373,13 @@ def test_valid_maps_round_trip(ball, tx, ty, tr, starts, polygons, sep, newline,
     assert m.starts.tolist() == [list(s) for s in starts]
     assert [p.tolist() for p in m.polygons] == [[list(v) for v in poly] for poly in polygons]
     assert m.edge_polygon.tolist() == [i for i, p in enumerate(polygons) for _ in p]
+
+
+def test_an_edge_whose_squared_length_underflows_is_refused():
+    # Found by the fuzz test: two distinct vertices 3.2e-305 apart; the edge's squared length
+    # is 0, and the contact test divided by it.
+    text = REAL_TEXTS["pinball_box"]
+    line = next(t for t in text.split("\n") if t.startswith("polygon"))
+    tiny = "polygon 0.0 0.0 3.2e-305 0.0 " + " ".join(line.split()[3:])
+    with pytest.raises(ValueError, match="zero-length edge"):
+        PinballMap.from_string(text.replace(line, tiny), source="tiny.cfg")
