@@ -26,9 +26,9 @@ The state is held for all P agents; rows that finished training (``compact``) si
 updated.
 
 Two paths compute a step (``native``): the torch path below, and a compiled one
-(:mod:`.native_hierarchical`, the default where every piece it replaces is the built-in one)
-that gives the same decisions with sums in an order of its own. The top level's rules are in
-:mod:`.top_level`, the trainer's protocol in :mod:`.episode_protocol`.
+(:mod:`skillchain_torch.backends.hierarchical`, the default where every piece it replaces is
+the built-in one) that gives the same decisions with sums in an order of its own. The top
+level's rules are in :mod:`.top_level`, the trainer's protocol in :mod:`.episode_protocol`.
 
 Example:
     >>> from skillchain_torch.options import OptionBank
@@ -48,10 +48,10 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
-from skillchain_torch.agents import native_hierarchical as _native
 from skillchain_torch.agents.episode_protocol import EpisodeProtocol
 from skillchain_torch.agents.option_execution import OptionExecution
 from skillchain_torch.agents.top_level import TopLevel, shared_fourier_columns
+from skillchain_torch.backends import hierarchical as backend
 from skillchain_torch.discovery.overlap import overlap_exclusion
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
@@ -121,12 +121,13 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
         optimizer: for a head of the user's own: a ``torch.optim.Optimizer`` over its
             parameters (default SGD at ``alpha``).
         device: torch device (default: the bank's).
-        native: run the per-step arithmetic in C (:mod:`.native_hierarchical`, and the
-            classifier's memberships and fits, :mod:`~skillchain_torch.options.
-            native_initiation`). Default: when built, on the CPU in float64 with Fourier option
-            heads and a float ``completion_reward``. The same decisions from the same uniforms,
-            but sums in an order of their own: the numbers agree with ``native=False`` to
-            rounding, not bit for bit (each is reproducible on its own, and P-invariant).
+        native: run the per-step arithmetic in C (:mod:`~skillchain_torch.backends.
+            hierarchical`, and the classifier's memberships and fits,
+            :mod:`~skillchain_torch.backends.initiation`). Default: when built, on the CPU in
+            float64 with Fourier option heads and a float ``completion_reward``. The same
+            decisions from the same uniforms, but sums in an order of their own: the numbers
+            agree with ``native=False`` to rounding, not bit for bit (each is reproducible on
+            its own, and P-invariant).
     """
 
     def __init__(
@@ -172,7 +173,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
                                                  dtype=torch.float64, device=device)).shape[-1]
         self.q_head = (LinearQHead(num_features, self.num_decisions, self.population,
                                    device=device) if q_head is None else q_head.to(device))
-        self.native = _native.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES, {
+        self.native = backend.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES, {
             "the top-level head": (self.q_head, LinearQHead),
             "the top-level features": (self.features, FourierBasis)})
         # Memberships and refits go with the step where the classifier is the built-in one;
@@ -318,7 +319,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
         reached = self.targets(next_obs, terminated, contains_next)
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
         if self.native:  # the rest in one compiled pass
-            return _native.transition(self, next_obs, reward, terminated, truncated, stepped,
+            return backend.transition(self, next_obs, reward, terminated, truncated, stepped,
                                       contains_next, reached, u)  # fmt: skip
         bank = self.bank
         ended = terminated | truncated

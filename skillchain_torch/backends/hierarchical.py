@@ -1,4 +1,4 @@
-"""The hierarchical agent's per-step arithmetic in C (``_hierarchical_native.c``).
+"""The hierarchical agent's per-step arithmetic in C (``_hierarchical.c``).
 
 :class:`~skillchain_torch.agents.HierarchicalAgent` with ``native=True`` (its default on CPU
 float64 with Fourier option heads, when built: :data:`AVAILABLE`) runs every transition
@@ -46,11 +46,12 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from skillchain_torch.backends import initiation
 from skillchain_torch.backends.select import builtin_type_problems, compiled
-from skillchain_torch.options import FourierOptionQHead, OptionStatus, native_initiation
+from skillchain_torch.options import FourierOptionQHead, OptionStatus
 
 try:
-    from skillchain_torch.agents import _hierarchical_native as _c
+    from skillchain_torch.backends import _hierarchical as _c
 except ImportError:  # built without a C compiler: the agent keeps its torch path
     _c = None
 
@@ -99,7 +100,7 @@ def resolve(bank, native: bool | None, completion_reward, num_primitives: int,
     head = bank.q_head
     exact = type(head) is FourierOptionQHead
     needs = {
-        "the compiled kernels (built)": AVAILABLE and native_initiation.AVAILABLE,
+        "the compiled kernels (built)": AVAILABLE and initiation.AVAILABLE,
         "the CPU": bank.status.device.type == "cpu",
         f"{num_primitives} option actions": head.num_actions == num_primitives,
         "a 4-d observation": bank.obs_dim == 4,

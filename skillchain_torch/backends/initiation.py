@@ -1,4 +1,4 @@
-"""The initiation classifier's memberships and fits in C (``_initiation_native.c``).
+"""The initiation classifier's memberships and fits in C (``_initiation.c``).
 
 :class:`~skillchain_torch.options.InitiationClassifier` uses these when its ``native`` flag is
 on (the skill-chaining agent turns it on with its own compiled kernels, on CPU float64):
@@ -36,13 +36,13 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from skillchain_torch.backends.native import for_c
 from skillchain_torch.features import PolynomialFeatures
-from skillchain_torch.native import for_c
 from skillchain_torch.options.examples import RESERVOIR_STREAM
 from skillchain_torch.options.logistic import sweep_terms
 
 try:
-    from skillchain_torch.options import _initiation_native as _c
+    from skillchain_torch.backends import _initiation as _c
 except ImportError:  # built without a C compiler: the classifier keeps its torch path
     _c = None
 

@@ -1,6 +1,6 @@
 /* Arithmetic shared by the compiled kernels (trainers/_sarsa_native.c,
- * skillchain_torch/agents/_hierarchical_native.c, skillchain_torch/options/_initiation_native.c,
- * skillchain_torch/_rng_native.c).
+ * skillchain_torch/backends/_hierarchical.c, skillchain_torch/backends/_initiation.c,
+ * skillchain_torch/backends/_rng.c).
  *
  * dot: eight interleaved partial sums in a fixed order, so a value depends only on its two
  * vectors (not on the batch, the alignment or the other agents). It differs from torch's

@@ -25,8 +25,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.native import for_c
-from skillchain_torch.options import native_initiation
+from skillchain_torch.backends import initiation as backend
+from skillchain_torch.backends.native import for_c
 from skillchain_torch.options.examples import store_places
 from skillchain_torch.options.nearby import within_any
 from skillchain_torch.options.status import check_slot_mask
@@ -115,7 +115,7 @@ class ExampleStores:
         k = torch.as_tensor(slots, dtype=torch.int64, device=device).expand(n)
         if self.native:  # one compiled pass, the same places and bits
             touched = torch.zeros(self.population, self.slots, dtype=torch.bool)
-            if not native_initiation.store(self, p.contiguous(), k.contiguous(),
+            if not backend.store(self, p.contiguous(), k.contiguous(),
                                            for_c(obs, torch.float64), for_c(labels, torch.bool),
                                            touched):  # fmt: skip
                 raise ValueError(f"agent/slot indices out of range for P={self.population}, "

@@ -1,4 +1,4 @@
-"""The hierarchical agent's compiled step (native_hierarchical) against the library pieces.
+"""The hierarchical agent's compiled step (backends/hierarchical.py) against the library pieces.
 
 Each kernel takes the same decisions from the same uniforms as the pieces it mirrors, and its
 values and weights agree to rounding (its sums run in their own order). The agents built on
@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 import torch
 
-from skillchain_torch.agents import HierarchicalAgent, SkillChainingAgent, native_hierarchical
+from skillchain_torch.agents import HierarchicalAgent, SkillChainingAgent
+from skillchain_torch.backends import hierarchical as native_hierarchical
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import FourierOptionQHead, MLPOptionQHead, OptionBank, OptionStatus
 from skillchain_torch.policies import epsilon_greedy
@@ -37,11 +38,11 @@ def test_built_in_ci():
     import os
 
     if os.environ.get("CI"):
-        assert native_hierarchical.AVAILABLE, "skillchain_torch.agents._hierarchical_native failed"
+        assert native_hierarchical.AVAILABLE, "skillchain_torch.backends._hierarchical failed"
 
 
 def test_doctest():
-    from skillchain_torch import native
+    from skillchain_torch.backends import native
 
     assert doctest.testmod(native_hierarchical).failed == 0
     assert doctest.testmod(native).failed == 0
