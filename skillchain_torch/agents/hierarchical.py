@@ -22,13 +22,14 @@ option's action choice), and 4 more when it restarts an episode, whatever it dec
 stream never depends on the other agents. Every tensor operation is row-independent (the
 library pieces are), so agent ``p`` of a population is bit-identical to the same agent alone.
 
-The state is held for all P agents; rows that finished training (``compact``) simply stop being
-updated.
+The per-step state (:class:`~.step_state.StepState`: ``s``, the decision in force, the action)
+is held for all P agents; rows that finished training (``compact``) simply stop being updated.
 
 Two paths compute a step (``native``): the torch path below, and a compiled one
-(:mod:`skillchain_torch.backends.hierarchical`, the default where every piece it replaces is
-the built-in one) that gives the same decisions with sums in an order of its own. The top
-level's rules are in :mod:`.top_level`, the trainer's protocol in :mod:`.episode_protocol`.
+(:mod:`.compiled_step` hands the StepState to :mod:`skillchain_torch.backends.hierarchical`,
+the default where every piece it replaces is the built-in one) that gives the same decisions
+with sums in an order of its own. The top level's rules are in :mod:`.top_level`, the
+trainer's protocol in :mod:`.episode_protocol`.
 
 Example:
     >>> from skillchain_torch.options import OptionBank
@@ -48,8 +49,10 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.agents.compiled_step import CompiledStep
 from skillchain_torch.agents.episode_protocol import EpisodeProtocol
 from skillchain_torch.agents.option_execution import OptionExecution
+from skillchain_torch.agents.step_state import STEP_FIELDS, StepState, StepStateFields
 from skillchain_torch.agents.top_level import TopLevel, shared_fourier_columns
 from skillchain_torch.backends import hierarchical as backend
 from skillchain_torch.discovery.overlap import overlap_exclusion
@@ -81,7 +84,8 @@ def as_bool(x: Tensor) -> Tensor:
     return x if x.dtype == torch.bool else x.to(torch.bool)
 
 
-class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
+class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep,
+                        StepStateFields, nn.Module):
     """Population-batched SMDP Sarsa agent over primitive actions and the options of a bank.
 
     Args:
@@ -173,9 +177,10 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
                                                  dtype=torch.float64, device=device)).shape[-1]
         self.q_head = (LinearQHead(num_features, self.num_decisions, self.population,
                                    device=device) if q_head is None else q_head.to(device))
-        self.native = backend.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES, {
-            "the top-level head": (self.q_head, LinearQHead),
-            "the top-level features": (self.features, FourierBasis)})
+        self.native = backend.resolve(
+            native, option_head=self.bank.q_head, top_head=self.q_head,
+            top_features=self.features, device=self.bank.status.device, obs_dim=self.obs_dim,
+            num_primitives=NUM_PRIMITIVES, completion_reward=completion_reward)
         # Memberships and refits go with the step where the classifier is the built-in one;
         # a classifier of the user's own keeps its torch path under a compiled step (and
         # native=True asks it for C, which it refuses, naming itself).
@@ -207,23 +212,12 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
             self.rng = CounterRNG.from_seed(int(seed), self.population, stream=AGENT_STREAM,
                                             device=device)
         P = self.population
-        f64 = dict(dtype=torch.float64, device=device)
-        i64 = dict(dtype=torch.int64, device=device)
-        # Per-agent episode state (all P rows; only the active ones change). Plain attributes,
-        # not buffers: they are replaced every step and saved by ``state_dict`` explicitly.
-        self.obs = torch.zeros(P, self.obs_dim, **f64)  # current s
-        self.option_code = bank.q_head.encode(self.obs)  # the option heads' code of s
-        self.contains = torch.zeros(P, self.slots, dtype=torch.bool, device=device)  # s in I_k
-        self.decision_phi = torch.zeros(P, num_features, **f64)  # phi(s_decision)
-        # phi(s) of the current state, kept only for intra_option_primitives (its updates
-        # are at s, which need not be where the decision in force was taken).
-        self.state_phi = torch.zeros(P, num_features if intra_option_primitives
-                                     else 0, **f64)  # fmt: skip
-        self.decision = torch.zeros(P, **i64)  # in force (< 5 or 5 + k)
-        self.option = torch.full((P,), -1, **i64)  # executing slot or -1
-        self.action = torch.zeros(P, **i64)  # primitive taken at s
-        self.decision_return = torch.zeros(P, **f64)  # R so far
-        self.duration = torch.zeros(P, **i64)  # k so far
+        # Per-agent episode state (all P rows; only the active ones change), declared once
+        # (StepState) and saved by ``state_dict`` explicitly; its fields read as attributes.
+        zeros = torch.zeros(P, self.obs_dim, dtype=torch.float64, device=device)
+        self.step_state = StepState.start(P, self.slots, self.obs_dim, num_features,
+                                          option_code=bank.q_head.encode(zeros),
+                                          state_phi=self.intra_option_primitives)
         self.active = torch.ones(P, dtype=torch.bool, device=device)
         self._index = torch.arange(P, device=device)
 
@@ -238,10 +232,8 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
 
     # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
     # parameters, buffers and submodules) costs more than the tensor maths for these.
-    _PLAIN = frozenset({"obs", "contains", "decision_phi", "decision", "option", "action",
-                        "decision_return", "duration", "active", "option_code", "last_q",
-                        "last_phi", "last_value", "_index", "_raw_contains", "state_phi",
-                        "last_available"})  # fmt: skip
+    _PLAIN = frozenset({"step_state", *STEP_FIELDS, "active", "last_q", "last_phi",
+                        "last_value", "_index", "_raw_contains", "last_available"})
     # The compiled transition also returns Q(s', d) of the decision in force (last_value).
     WANTS_VALUE = False
 
@@ -318,9 +310,10 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
         contains_next = self.membership(next_obs)
         reached = self.targets(next_obs, terminated, contains_next)
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
-        if self.native:  # the rest in one compiled pass
-            return backend.transition(self, next_obs, reward, terminated, truncated, stepped,
-                                      contains_next, reached, u)  # fmt: skip
+        if self.native:  # the rest in one compiled pass, on the declared StepState
+            return self._compiled_transition(backend.AtNext(
+                next_obs, reward, terminated, truncated, stepped, contains_next, reached, u,
+                *self._encode_next(next_obs)))
         bank = self.bank
         ended = terminated | truncated
         reward = torch.where(stepped, reward, torch.zeros_like(reward))

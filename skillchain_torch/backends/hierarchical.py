@@ -43,21 +43,32 @@ Example:
 
 from __future__ import annotations
 
+from dataclasses import replace
+from typing import TYPE_CHECKING, NamedTuple
+
 import torch
 from torch import Tensor
 
 from skillchain_torch.backends import initiation
+from skillchain_torch.backends.native import for_c
 from skillchain_torch.backends.select import builtin_type_problems, compiled
+from skillchain_torch.features import FourierBasis
+from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import FourierOptionQHead, OptionStatus
+
+if TYPE_CHECKING:  # (the agent's module imports this one)
+    from skillchain_torch.agents.step_state import StepState
 
 try:
     from skillchain_torch.backends import _hierarchical as _c
 except ImportError:  # built without a C compiler: the agent keeps its torch path
     _c = None
 
-__all__ = ["AVAILABLE", "choose", "act", "resolve", "transition"]
+__all__ = ["AVAILABLE", "AtNext", "Learned", "StepOutputs", "StepRules", "act", "choose",
+           "resolve", "transition"]
 
 AVAILABLE = _c is not None
+OBS_DIM = 4  # the step copies Pinball's 4 numbers a state
 
 
 def choose(w: Tensor, phi: Tensor, available: Tensor, rows: Tensor, dense: int,
@@ -85,102 +96,136 @@ def act(w: Tensor, code: Tensor, rows: Tensor, decision: Tensor, option: Tensor,
     return action
 
 
-def resolve(bank, native: bool | None, completion_reward, num_primitives: int,
-            pieces: dict | None = None) -> bool:
-    """The agent's ``native`` argument made a choice for ``bank``'s options: ``None`` is
-    ``True`` where the compiled path applies; ``True`` where it does not raises
-    ``ValueError`` naming what is missing (:func:`~skillchain_torch.backends.compiled`).
+def resolve(native: bool | None, *, option_head, top_head, top_features, device: torch.device,
+            obs_dim: int, num_primitives: int, completion_reward) -> bool:  # fmt: skip
+    """The agent's ``native`` argument made a choice: ``None`` is ``True`` where the compiled
+    step applies; ``True`` where it does not raises ``ValueError`` naming what is missing
+    (:func:`~skillchain_torch.backends.compiled`).
 
-    The step replaces the option heads' and the top level's maths, so it runs only where the
-    option head is exactly :class:`FourierOptionQHead` and every piece in ``pieces``
-    (``{name: (piece, built-in class)}``, the agent's top-level head and basis) is exactly its
-    built-in class. The initiation sets are not replaced (their memberships reach the step
-    from torch); the classifier chooses its own kernels (``InitiationClassifier.set_native``).
+    The step replaces the maths of the option heads, the top-level head and its features, so
+    it runs only where they are exactly :class:`FourierOptionQHead`, :class:`LinearQHead` and
+    :class:`FourierBasis`, on ``device`` the CPU. The initiation sets are not replaced (their
+    memberships reach the step from torch); the classifier chooses its own kernels
+    (``InitiationClassifier.set_native``).
     """
-    head = bank.q_head
-    exact = type(head) is FourierOptionQHead
+    exact = type(option_head) is FourierOptionQHead
     needs = {
         "the compiled kernels (built)": AVAILABLE and initiation.AVAILABLE,
-        "the CPU": bank.status.device.type == "cpu",
-        f"{num_primitives} option actions": head.num_actions == num_primitives,
-        "a 4-d observation": bank.obs_dim == 4,
-        "float64 option heads": not exact or head.weight.dtype == torch.float64,
+        "the CPU": device.type == "cpu",
+        f"{num_primitives} option actions": option_head.num_actions == num_primitives,
+        "a 4-d observation": obs_dim == OBS_DIM,
+        "float64 option heads": not exact or option_head.weight.dtype == torch.float64,
         "a float completion_reward": not isinstance(completion_reward, Tensor),
     }
-    pieces = {"the option head": (head, FourierOptionQHead), **(pieces or {})}
-    return compiled(native, needs, builtin_type_problems(pieces))
+    return compiled(native, needs, builtin_type_problems({
+        "the option head": (option_head, FourierOptionQHead),
+        "the top-level head": (top_head, LinearQHead),
+        "the top-level features": (top_features, FourierBasis)}))
 
 
-# The agent's per-step state, in the order the C step reads and writes it.
-STATE = ("obs", "option_code", "contains", "decision_phi", "decision", "option", "action",
-         "decision_return", "duration")
+class StepRules(NamedTuple):
+    """The agent's settings the step follows (``HierarchicalAgent``'s arguments)."""
+
+    epsilon: float
+    option_epsilon: float
+    gamma: float
+    max_option_steps: int
+    option_alpha: float  #: the option heads' step size (``FourierOptionQHead.alpha``)
+    completion_reward: float
+    failure_bootstrap_primitives: bool  #: ``failure_bootstrap == "primitives"``
+    intra_option_primitives: bool
+    interruption: bool
 
 
-def _own(agent, name: str) -> Tensor:
-    """The agent's float64 state array ``name``, contiguous (made so once if it is not)."""
-    x = getattr(agent, name)
-    if not x.is_contiguous() or x.dtype != torch.float64:
-        x = x.to(torch.float64).contiguous()
-        setattr(agent, name, x)
-    return x
+class Learned(NamedTuple):
+    """The weights the step updates in place, and the slots' status (which options learn)."""
+
+    top: Tensor  #: ``[P, D, F]``: the top-level ``LinearQHead.weight``
+    options: Tensor  #: ``[P, K, A, Fo]``: the ``FourierOptionQHead.weight``
+    step_size: Tensor  #: ``[]`` or ``[F]``: ``SarsaUpdate.step_size``
+    status: Tensor  #: ``[P, K]`` int64: each slot's :class:`OptionStatus`
 
 
-def transition(agent, next_obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
-               stepped: Tensor, contains_next: Tensor, reached: Tensor,
-               uniforms: Tensor) -> dict[str, Tensor]:  # fmt: skip
-    """The rest of ``agent.transition`` after the memberships, targets and uniforms
-    (``[P, 4]``) of ``s'``: its features, then every row in one C pass (weights updated in
-    place, the state at ``s'`` in fresh tensors but for ``option_code`` and ``decision_phi``,
-    updated in place). Returns the transition's monitoring dict.
+class AtNext(NamedTuple):
+    """What torch computed at ``s'`` for the step (``[P]`` flags masked to ``stepped``)."""
 
-    ``next_obs`` holds ``s`` on rows not stepped; ``terminated``/``truncated`` are masked to
-    ``stepped``; ``reward`` is float64.
+    obs: Tensor  #: ``[P, 4]``: ``s'`` (``s`` on rows not stepped)
+    reward: Tensor  #: ``[P]`` float64
+    terminated: Tensor  #: ``[P]`` bool
+    truncated: Tensor  #: ``[P]`` bool
+    stepped: Tensor  #: ``[P]`` bool: the rows that took a step
+    contains: Tensor  #: ``[P, K]`` bool: the memberships at ``s'``
+    reached: Tensor  #: ``[P, K]`` bool: each option's target event at ``s'``
+    uniforms: Tensor  #: ``[P, 4]``: the step's draws (top level, then the option's)
+    phi: Tensor  #: ``[P, F]``: the top level's features of ``s'``
+    code: Tensor | None  #: ``[P, Fo]``: the option heads' code of ``s'``, or ``None``:
+    code_columns: Tensor | None  #: ... picked from ``phi`` at these ``[Fo]`` int64 columns
+
+
+class StepOutputs(NamedTuple):
+    """What the step reports beside the state at ``s'`` (``[P]`` unless noted)."""
+
+    q: Tensor  #: ``[P, D]``: the values the decision at ``s'`` was taken with (0 elsewhere)
+    decision_ended: Tensor  #: bool: the SMDP update happened
+    duration: Tensor  #: int64: the decision's duration k, this step included
+    decision_return: Tensor  #: its return R, this step included
+    option_delta: Tensor  #: ``[P, K]``: intra-option TD errors (0 where no update)
+    smdp_delta: Tensor  #: the SMDP TD errors (0 where no update)
+    started: Tensor  #: bool: the rows that took an option as their new decision
+    value: Tensor | None  #: ``Q(s', d)`` of the decision in force after the step
+
+
+def transition(state: StepState, learned: Learned, at_next: AtNext, rules: StepRules,
+               want_value: bool = False) -> tuple[StepState, StepOutputs]:  # fmt: skip
+    """``HierarchicalAgent.transition`` after the memberships, targets, features and uniforms
+    of ``s'``, every row in one C pass: ``(the state at s', the step's outputs)``.
+
+    ``learned``'s weights are updated in place. The new state's ``option_code``,
+    ``decision_phi`` and ``state_phi`` are ``state``'s own arrays updated in place (made
+    contiguous float64 first if they are not); its other fields are fresh tensors, so
+    ``state``'s still hold ``s``. ``want_value``: compute :attr:`StepOutputs.value`.
     """
-    bank, head = agent.bank, agent.q_head
-    P, D, F = head.weight.shape
-    _, K, A, Fo = bank.q_head.weight.shape
-    phi_next = agent.features(next_obs)
-    # The option heads' code is picked from phi_next inside (shared_fourier_columns).
-    columns = agent._code_columns
-    next_code = bank.q_head.encode(next_obs) if columns is None else None
-    reward, reached = reward.contiguous(), reached.contiguous()
+    P, D, F = learned.top.shape
+    _, K, A, Fo = learned.options.shape
     f64 = torch.float64
-    # The two large state arrays are updated in place (see the C step); they are the agent's
-    # own (every other writer replaces them), so nothing else sees the change. The [P]
-    # outputs are rows of three fresh blocks (one allocation per dtype, not one per output).
+    reward, reached = at_next.reward.contiguous(), at_next.reached.contiguous()
+    # The [P] outputs are rows of three fresh blocks (one allocation per dtype, not one per
+    # output: this runs every step).
     decision, option, action, duration, d_next, info_duration = torch.empty(
         6, P, dtype=torch.int64).unbind(0)  # fmt: skip
     decision_return, smdp_delta, info_return, value = torch.empty(4, P, dtype=f64).unbind(0)
     decision_ended, started = torch.empty(2, P, dtype=torch.bool).unbind(0)
     q, option_delta = torch.empty(P, D, dtype=f64), torch.empty(P, K, dtype=f64)
-    new_state = (torch.empty(P, 4, dtype=f64), _own(agent, "option_code"),
-                 torch.empty(P, K, dtype=torch.bool), _own(agent, "decision_phi"), decision,
-                 option, action, decision_return, duration)  # STATE's order
-    value = value if agent.WANTS_VALUE else None
-    state = agent.__dict__  # STATE's arrays are plain attributes (HierarchicalAgent._PLAIN)
-    step_size, gamma = agent.update.step_size, agent.gamma
-    _c.step(P, K, A, F, Fo, head.weight.data_ptr(), bank.q_head.weight.data_ptr(),
-            *[state[name].data_ptr() for name in STATE],
-            next_obs.data_ptr(), reward.data_ptr(), terminated.data_ptr(), truncated.data_ptr(),
-            stepped.data_ptr(), contains_next.data_ptr(), reached.data_ptr(),
-            phi_next.data_ptr(), 0 if next_code is None else next_code.data_ptr(),
-            0 if columns is None else columns.data_ptr(), bank.status.data_ptr(),
-            uniforms.data_ptr(), agent.epsilon, agent.option_epsilon, gamma, gamma != 1.0,
-            agent.max_option_steps, bank.q_head.alpha,
-            float(agent.option_update.completion_reward), step_size.data_ptr(),
-            1 if step_size.ndim else 0, int(OptionStatus.LEARNING),
-            *[x.data_ptr() for x in new_state], q.data_ptr(), d_next.data_ptr(),
-            decision_ended.data_ptr(), option_delta.data_ptr(), smdp_delta.data_ptr(),
-            info_duration.data_ptr(), info_return.data_ptr(), started.data_ptr(),
-            0 if value is None else value.data_ptr(),
-            int(agent.failure_bootstrap == "primitives"),
-            _own(agent, "state_phi").data_ptr() if agent.intra_option_primitives else 0,
-            int(agent.interruption))  # fmt: skip
-    info = {"decision_ended": decision_ended, "duration": info_duration,
-            "decision_return": info_return, "option_delta": option_delta,
-            "smdp_delta": smdp_delta, "decision": state["decision"], "option": state["option"],
-            "reached": reached}  # fmt: skip
-    state.update(zip(STATE, new_state))
-    state.update(last_phi=phi_next, last_q=q, last_value=value)
-    agent._options_starting(started)
-    return info
+    # The two large arrays are updated in place (each row is read before it is written).
+    code, decision_phi = for_c(state.option_code, f64), for_c(state.decision_phi, f64)
+    state_phi = for_c(state.state_phi, f64) if rules.intra_option_primitives else None
+    new = replace(state, obs=torch.empty(P, 4, dtype=f64), option_code=code,
+                  contains=torch.empty(P, K, dtype=torch.bool), decision_phi=decision_phi,
+                  decision=decision, option=option, action=action,
+                  decision_return=decision_return, duration=duration,
+                  state_phi=state.state_phi if state_phi is None else state_phi)  # fmt: skip
+    value = value if want_value else None
+    columns, next_code = at_next.code_columns, at_next.code
+    _c.step(P, K, A, F, Fo, learned.top.data_ptr(), learned.options.data_ptr(),
+            *[x.data_ptr() for x in (state.obs, code, state.contains, decision_phi,
+                                     state.decision, state.option, state.action,
+                                     state.decision_return, state.duration)],
+            at_next.obs.data_ptr(), reward.data_ptr(), at_next.terminated.data_ptr(),
+            at_next.truncated.data_ptr(), at_next.stepped.data_ptr(),
+            at_next.contains.data_ptr(), reached.data_ptr(), at_next.phi.data_ptr(),
+            0 if next_code is None else next_code.data_ptr(),
+            0 if columns is None else columns.data_ptr(), learned.status.data_ptr(),
+            at_next.uniforms.data_ptr(), rules.epsilon, rules.option_epsilon, rules.gamma,
+            rules.gamma != 1.0, rules.max_option_steps, rules.option_alpha,
+            float(rules.completion_reward), learned.step_size.data_ptr(),
+            1 if learned.step_size.ndim else 0, int(OptionStatus.LEARNING),
+            *[x.data_ptr() for x in (new.obs, new.option_code, new.contains, new.decision_phi,
+                                     new.decision, new.option, new.action,
+                                     new.decision_return, new.duration)],
+            q.data_ptr(), d_next.data_ptr(), decision_ended.data_ptr(), option_delta.data_ptr(),
+            smdp_delta.data_ptr(), info_duration.data_ptr(), info_return.data_ptr(),
+            started.data_ptr(), 0 if value is None else value.data_ptr(),
+            int(rules.failure_bootstrap_primitives),
+            0 if state_phi is None else state_phi.data_ptr(), int(rules.interruption))  # fmt: skip
+    return new, StepOutputs(q, decision_ended, info_duration, info_return, option_delta,
+                            smdp_delta, started, value)
