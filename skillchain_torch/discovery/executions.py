@@ -33,7 +33,7 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.backends import discovery as backend
-from skillchain_torch.backends import initiation as native_initiation
+from skillchain_torch.backends import initiation as initiation_backend
 from skillchain_torch.options import InitiationClassifier, OptionQHead
 
 __all__ = ["execution_outcome", "ExecutionTrace"]
@@ -125,8 +125,8 @@ class ExecutionTrace:
         if (classifier.native and self.states.dtype == torch.float64
                 and self.states.shape[-1] == OBS_DIM):  # fmt: skip
             touched = torch.zeros(classifier.population, classifier.slots, dtype=torch.bool)
-            native_initiation.store_executions(classifier, self.states, slot, duration,
-                                               success, failure, touched)  # fmt: skip
+            initiation_backend.store_executions(classifier.stores, self.states, slot, duration,
+                                                success, failure, touched)  # fmt: skip
             classifier.dirty |= touched
             return touched
         agents, slots, obs, labels = self.examples(slot, duration, success, failure)

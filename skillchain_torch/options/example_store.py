@@ -42,6 +42,14 @@ class ExampleStores:
     ``keep_negatives``, ``distance``, ``distance_dims``, ``native``.
     """
 
+    @property
+    def stores(self) -> backend.Stores:
+        """The stores' buffers and settings as the compiled kernels take them (they write
+        the buffers in place)."""
+        return backend.Stores(self.examples, self.labels, self.count, self.seen,
+                              self.generation, self.seeds, self.replacement == "ring",
+                              self.keep_negatives)  # fmt: skip
+
     def _within(self, points: Tensor, examples: Tensor) -> Tensor:
         """``|point - example| <= distance`` (in ``distance_dims``) for every pair:
         ``points [..., N, 4]``, ``examples [..., M, 4]`` -> ``[..., N, M]``.
@@ -115,9 +123,9 @@ class ExampleStores:
         k = torch.as_tensor(slots, dtype=torch.int64, device=device).expand(n)
         if self.native:  # one compiled pass, the same places and bits
             touched = torch.zeros(self.population, self.slots, dtype=torch.bool)
-            if not backend.store(self, p.contiguous(), k.contiguous(),
-                                           for_c(obs, torch.float64), for_c(labels, torch.bool),
-                                           touched):  # fmt: skip
+            if not backend.store(self.stores, p.contiguous(), k.contiguous(),
+                                 for_c(obs, torch.float64), for_c(labels, torch.bool),
+                                 touched):  # fmt: skip
                 raise ValueError(f"agent/slot indices out of range for P={self.population}, "
                                  f"K={self.slots}")  # fmt: skip
             self.dirty |= touched

@@ -240,7 +240,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
         if self.native:
             obs = self._check_obs(obs)
             return backend.contains(
-                self.features, self.centered, self.weight, self.bias, self.trained,
+                self.features.factor_index, self.centered, self.weight, self.bias, self.trained,
                 self.constrained, obs, self.examples, self.labels, self.count, self._dims,
                 self.distance)
         member = (self.logit(obs) > 0) | ~self.trained
@@ -285,9 +285,10 @@ class InitiationClassifier(ExampleStores, nn.Module):
         mask = self.dirty if mask is None else check_slot_mask(mask, self.population, self.slots)
         if self.native:  # every slot in one compiled pass, the same bits
             return backend.fit(
-                self.features, self.centered, for_c(mask, torch.bool), self.examples, self.labels,
-                self.count, self.weight, self.bias, self.lr, self.sweeps, self.balanced,
-                self.sweeps_done, self.trained, self.dirty)  # fmt: skip
+                self.features.factor_index, self.centered, for_c(mask, torch.bool),
+                self.examples, self.labels, self.count, self.weight, self.bias, self.lr,
+                self.sweeps, self.balanced, self.sweeps_done, self.trained,
+                self.dirty)  # fmt: skip
         mask = mask.to(self.weight.device) & (self.count > 0)
         where = mask.nonzero()
         if where.shape[0] > 0:
