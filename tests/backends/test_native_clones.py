@@ -26,7 +26,7 @@ from skillchain_torch.backends import hierarchical, initiation
 from skillchain_torch.options import OptionBank
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig, native_sarsa
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 KERNELS = {  # module holding the compiled handle -> its source
     initiation: "skillchain_torch/backends/_initiation.c",
     hierarchical: "skillchain_torch/backends/_hierarchical.c",
