@@ -23,6 +23,11 @@ The sums run in a fixed order of their own, so values and weights agree with the
 to rounding (tested at 1e-10), not bit for bit. Each agent's numbers depend on that agent
 alone, so agent p of a population still equals agent p alone, bit for bit.
 
+:func:`transition` takes the agent's declared state (:class:`~skillchain_torch.agents.
+step_state.StepState`) and what torch computed at ``s'`` (:class:`AtNext`), the weights it
+learns (:class:`Learned`) and the agent's settings (:class:`StepRules`), and returns the state
+at ``s'`` with :class:`StepOutputs`; it never reads the agent itself.
+
 Nothing is checked here: callers pass contiguous CPU float64 tensors (int64 indices, bool
 flags) of matching shapes.
 

@@ -5,12 +5,13 @@ import doctest
 import pytest
 import torch
 
+import skillchain_torch.backends
 from skillchain_torch.backends import discovery, fourier, native, rng, select
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.rng import CounterRNG
 
 
-@pytest.mark.parametrize("module", [select, fourier, rng, native])
+@pytest.mark.parametrize("module", [skillchain_torch.backends, select, fourier, rng, native])
 def test_doctest(module):
     assert doctest.testmod(module).failed == 0
 
