@@ -25,7 +25,6 @@ experiment; default: 100 agents x 5 episodes, said so in the output).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import itertools
 import math
 import statistics
@@ -36,12 +35,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skillchain_torch import rng
 from skillchain_torch.backends import sarsa as native_sarsa
-from skillchain_torch.discovery import native_discovery
-from skillchain_torch.envs.pinball import native as pinball_native
-from skillchain_torch.envs.pinball import physics
-from skillchain_torch.features import fourier
+from skillchain_torch.backends.select import same_bits_kernels
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
 MAP = "pinball_simple_single"
@@ -54,28 +49,13 @@ def time_trainer(population: int, agent_steps: int, threads: int, repeats: int =
     best = 0.0
     for r in range(repeats):
         cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=r)
-        with compiled_same_bits(native is not False):
+        with same_bits_kernels(native is not False):
             trainer = PopulationTrainer(cfg, num_threads=threads, native=native)
             trainer.train(max_agent_steps=20 * population)  # warm-up: caches, allocations
             start, done = time.perf_counter(), trainer.agent_steps
             trainer.train(max_agent_steps=done + agent_steps)
         best = max(best, (trainer.agent_steps - done) / (time.perf_counter() - start))
     return best
-
-
-@contextlib.contextmanager
-def compiled_same_bits(on: bool):
-    """The compiled pieces that give the torch path's bits on or off (global switches): the
-    Pinball step, FourierBasis's arguments, CounterRNG's draws, skill chaining's bookkeeping."""
-    saved = physics.NATIVE, fourier.NATIVE, rng.NATIVE, native_discovery.NATIVE
-    physics.NATIVE = on and pinball_native.AVAILABLE
-    fourier.NATIVE = on and fourier._fourier_native is not None
-    rng.NATIVE = on and rng._rng_native is not None
-    native_discovery.NATIVE = on and native_discovery._c is not None
-    try:
-        yield
-    finally:
-        physics.NATIVE, fourier.NATIVE, rng.NATIVE, native_discovery.NATIVE = saved
 
 
 class NumpySarsa:
@@ -147,7 +127,7 @@ def skill_chaining_trainer(population: int, threads: int, seed: int = 0,
     seeds = torch.arange(population, dtype=torch.int64) + seed
     given = OptionBank.from_agent(OPTIONS, 0, population, seeds=seeds)
     trainer.agent.bank.load_state_dict(given.state_dict())
-    with compiled_same_bits(native is not False):
+    with same_bits_kernels(native is not False):
         trainer.train(max_agent_steps=20 * population)
     return trainer
 
@@ -166,7 +146,7 @@ def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
     for name, native in (("flat_torch", False), ("flat_native", None)):
         cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=0)
         trainers[name] = PopulationTrainer(cfg, num_threads=threads, native=native)
-        with compiled_same_bits(native is not False):
+        with same_bits_kernels(native is not False):
             trainers[name].train(max_agent_steps=20 * population)
     for name, native in (("sc_torch", False), ("sc_native", None)):
         trainers[name] = skill_chaining_trainer(population, threads, native=native)
@@ -174,7 +154,7 @@ def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
     for _ in range(rounds):
         for name, trainer in trainers.items():
             steps = options_steps if name.startswith("sc_") else flat_steps
-            with compiled_same_bits(not name.endswith("_torch")):
+            with same_bits_kernels(not name.endswith("_torch")):
                 start, done = time.perf_counter(), trainer.agent_steps
                 trainer.train(max_agent_steps=done + steps)
             rates[name].append((trainer.agent_steps - done) / (time.perf_counter() - start))

@@ -22,15 +22,9 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-try:
-    from skillchain_torch import _rng_native
-except ImportError:  # built without a C compiler: the tensor path below
-    _rng_native = None
+from skillchain_torch.backends import rng as backend
 
 _TWO64 = 1 << 64
-# CPU streams draw in C (``_rng_native.c``: the same words, so the same bits); tests switch
-# it off to compare.
-NATIVE = _rng_native is not None
 
 
 def _as_int64(value: int) -> int:
@@ -123,22 +117,12 @@ class CounterRNG:
         return self.seeds.device
 
     def _draw(self, n: int, mask: Tensor | None, uniform: bool) -> Tensor | None:
-        """The compiled draw (words or uniforms), or ``None`` where it does not apply."""
-        if not (NATIVE and self.seeds.device.type == "cpu" and self.seeds.is_contiguous()
-                and self.counter.is_contiguous()):  # fmt: skip
+        """The compiled draw (words or uniforms, the same bits), or ``None`` where it does not
+        apply."""
+        drawn = backend.draw(self.seeds, self.counter, n, mask, self._salt, uniform)
+        if drawn is None:
             return None
-        if mask is not None:
-            if mask.dtype != torch.bool or not mask.is_cpu:
-                mask = mask.to(device="cpu", dtype=torch.bool)
-            mask = mask if mask.is_contiguous() else mask.contiguous()
-            if mask.shape != self.seeds.shape:
-                return None  # let the tensor path broadcast or raise
-        out = torch.empty(self.population, n, dtype=torch.float64 if uniform else torch.int64)
-        counter = torch.empty_like(self.counter)
-        _rng_native.draw(self.population, n, self.seeds.data_ptr(), self.counter.data_ptr(),
-                         0 if mask is None else mask.data_ptr(), self._salt, uniform,
-                         out.data_ptr(), counter.data_ptr())  # fmt: skip
-        self.counter = counter
+        out, self.counter = drawn
         return out
 
     def bits(self, n: int, mask: Tensor | None = None) -> Tensor:

@@ -20,7 +20,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.native import check_same_kernels
+from skillchain_torch.backends.native import check_same_kernels
 
 __all__ = ["EpisodeProtocol"]
 

@@ -54,11 +54,11 @@ import torch
 from torch import Tensor, nn
 
 from skillchain_torch.backends import sarsa as native_sarsa
+from skillchain_torch.backends.native import check_same_kernels, for_c
 from skillchain_torch.backends.select import compiled
 from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
-from skillchain_torch.native import check_same_kernels, for_c
 from skillchain_torch.objectives import SarsaUpdate
 from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy, epsilon_greedy
 from skillchain_torch.rng import CounterRNG

@@ -22,13 +22,14 @@ option's action choice), and 4 more when it restarts an episode, whatever it dec
 stream never depends on the other agents. Every tensor operation is row-independent (the
 library pieces are), so agent ``p`` of a population is bit-identical to the same agent alone.
 
-The state is held for all P agents; rows that finished training (``compact``) simply stop being
-updated.
+The per-step state (:class:`~.step_state.StepState`: ``s``, the decision in force, the action)
+is held for all P agents; rows that finished training (``compact``) simply stop being updated.
 
 Two paths compute a step (``native``): the torch path below, and a compiled one
-(:mod:`.native_hierarchical`, the default where every piece it replaces is the built-in one)
-that gives the same decisions with sums in an order of its own. The top level's rules are in
-:mod:`.top_level`, the trainer's protocol in :mod:`.episode_protocol`.
+(:mod:`.compiled_step` hands the StepState to :mod:`skillchain_torch.backends.hierarchical`,
+the default where every piece it replaces is the built-in one) that gives the same decisions
+with sums in an order of its own. The top level's rules are in :mod:`.top_level`, the
+trainer's protocol in :mod:`.episode_protocol`.
 
 Example:
     >>> from skillchain_torch.options import OptionBank
@@ -48,10 +49,12 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
-from skillchain_torch.agents import native_hierarchical as _native
+from skillchain_torch.agents.compiled_step import CompiledStep
 from skillchain_torch.agents.episode_protocol import EpisodeProtocol
 from skillchain_torch.agents.option_execution import OptionExecution
+from skillchain_torch.agents.step_state import STEP_FIELDS, StepState, StepStateFields
 from skillchain_torch.agents.top_level import TopLevel, shared_fourier_columns
+from skillchain_torch.backends import hierarchical as backend
 from skillchain_torch.discovery.overlap import overlap_exclusion
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
@@ -87,7 +90,8 @@ def as_bool(x: Tensor) -> Tensor:
     return x if x.dtype == torch.bool else x.to(torch.bool)
 
 
-class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
+class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep,
+                        StepStateFields, nn.Module):
     """Population-batched SMDP Sarsa agent over primitive actions and the options of a bank.
 
     Args:
@@ -127,12 +131,13 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
         optimizer: for a head of the user's own: a ``torch.optim.Optimizer`` over its
             parameters (default SGD at ``alpha``).
         device: torch device (default: the bank's).
-        native: run the per-step arithmetic in C (:mod:`.native_hierarchical`, and the
-            classifier's memberships and fits, :mod:`~skillchain_torch.options.
-            native_initiation`). Default: when built, on the CPU in float64 with Fourier option
-            heads and a float ``completion_reward``. The same decisions from the same uniforms,
-            but sums in an order of their own: the numbers agree with ``native=False`` to
-            rounding, not bit for bit (each is reproducible on its own, and P-invariant).
+        native: run the per-step arithmetic in C (:mod:`~skillchain_torch.backends.
+            hierarchical`, and the classifier's memberships and fits,
+            :mod:`~skillchain_torch.backends.initiation`). Default: when built, on the CPU in
+            float64 with Fourier option heads and a float ``completion_reward``. The same
+            decisions from the same uniforms, but sums in an order of their own: the numbers
+            agree with ``native=False`` to rounding, not bit for bit (each is reproducible on
+            its own, and P-invariant).
     """
 
     def __init__(
@@ -178,9 +183,10 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
                                                  dtype=torch.float64, device=device)).shape[-1]
         self.q_head = (LinearQHead(num_features, self.num_decisions, self.population,
                                    device=device) if q_head is None else q_head.to(device))
-        self.native = _native.resolve(self.bank, native, completion_reward, NUM_PRIMITIVES, {
-            "the top-level head": (self.q_head, LinearQHead),
-            "the top-level features": (self.features, FourierBasis)})
+        self.native = backend.resolve(
+            native, option_head=self.bank.q_head, top_head=self.q_head,
+            top_features=self.features, device=self.bank.status.device, obs_dim=self.obs_dim,
+            num_primitives=NUM_PRIMITIVES, completion_reward=completion_reward)
         # Memberships and refits go with the step where the classifier is the built-in one;
         # a classifier of the user's own keeps its torch path under a compiled step (and
         # native=True asks it for C, which it refuses, naming itself).
@@ -212,26 +218,12 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
             self.rng = CounterRNG.from_seed(int(seed), self.population, stream=AGENT_STREAM,
                                             device=device)
         P = self.population
-        f64 = dict(dtype=torch.float64, device=device)
-        i64 = dict(dtype=torch.int64, device=device)
-        # Per-agent episode state (all P rows; only the active ones change). Plain attributes,
-        # not buffers: they are replaced every step and saved by ``state_dict`` explicitly.
-        self.obs = torch.zeros(P, self.obs_dim, **f64)  # current s
-        self.option_code = bank.q_head.encode(self.obs)  # the option heads' code of s
-        self.contains = torch.zeros(P, self.slots, dtype=torch.bool, device=device)  # s in I_k
-        # s in option k's own set (the classifier's, before any no-overlap narrowing): where
-        # option k learns off-policy (objectives.option_update_mask)
-        self.own_contains = self.contains.clone()
-        self.decision_phi = torch.zeros(P, num_features, **f64)  # phi(s_decision)
-        # phi(s) of the current state, kept only for intra_option_primitives (its updates
-        # are at s, which need not be where the decision in force was taken).
-        self.state_phi = torch.zeros(P, num_features if intra_option_primitives
-                                     else 0, **f64)  # fmt: skip
-        self.decision = torch.zeros(P, **i64)  # in force (< 5 or 5 + k)
-        self.option = torch.full((P,), -1, **i64)  # executing slot or -1
-        self.action = torch.zeros(P, **i64)  # primitive taken at s
-        self.decision_return = torch.zeros(P, **f64)  # R so far
-        self.duration = torch.zeros(P, **i64)  # k so far
+        # Per-agent episode state (all P rows; only the active ones change), declared once
+        # (StepState) and saved by ``state_dict`` explicitly; its fields read as attributes.
+        zeros = torch.zeros(P, self.obs_dim, dtype=torch.float64, device=device)
+        self.step_state = StepState.start(P, self.slots, self.obs_dim, num_features,
+                                          option_code=bank.q_head.encode(zeros),
+                                          state_phi=self.intra_option_primitives)
         self.active = torch.ones(P, dtype=torch.bool, device=device)
         self._index = torch.arange(P, device=device)
 
@@ -246,10 +238,8 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
 
     # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
     # parameters, buffers and submodules) costs more than the tensor maths for these.
-    _PLAIN = frozenset({"obs", "contains", "own_contains", "decision_phi", "decision", "option",
-                        "action", "decision_return", "duration", "active", "option_code", "last_q",
-                        "last_phi", "last_value", "_index", "_raw_contains", "state_phi",
-                        "last_available"})  # fmt: skip
+    _PLAIN = frozenset({"step_state", *STEP_FIELDS, "active", "last_q", "last_phi",
+                        "last_value", "_index", "_raw_contains", "last_available"})
     # The compiled transition also returns Q(s', d) of the decision in force (last_value).
     WANTS_VALUE = False
 
@@ -317,23 +307,25 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
         ``option_delta [P, K]`` (intra-option TD errors, 0 outside the initiation sets) and
         ``reached [P, K]`` (each option's target event at ``s'``).
         """
-        # What may be changed by a subclass or the user (memberships, target events) is
-        # evaluated here for both paths.
+        # What a subclass or the user may change (memberships, targets) runs here, both paths.
         terminated, truncated = as_bool(terminated), as_bool(truncated)
         reward = reward if reward.dtype == torch.float64 else reward.to(torch.float64)
         if not self.all_stepped(stepped):  # (with every agent stepped the masks change nothing)
             terminated, truncated = terminated & stepped, truncated & stepped
             next_obs = torch.where(stepped[:, None], next_obs, self.obs)
-        # The options that learn from s: the executing one, and those whose own sets hold s.
+        # The options learning from s: the executing one, and those whose own sets hold s.
         learn = option_update_mask(self.own_contains, self.option,
                                    self.bank.live() & stepped[:, None])  # fmt: skip
         contains_next = self.membership(next_obs)
         reached = self.targets(next_obs, terminated, contains_next)
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
-        self.own_contains = torch.where(stepped[:, None], self._raw_contains, self.own_contains)
-        if self.native:  # the rest in one compiled pass
-            return _native.transition(self, next_obs, reward, terminated, truncated, stepped,
-                                      contains_next, reached, u, learn)  # fmt: skip
+        own_next = torch.where(stepped[:, None], self._raw_contains, self.own_contains)
+        if self.native:  # the rest in one compiled pass, on the declared StepState
+            info = self._compiled_transition(backend.AtNext(
+                next_obs, reward, terminated, truncated, stepped, contains_next, reached, u,
+                *self._encode_next(next_obs), learn=learn))
+            self.own_contains = own_next
+            return info
         bank = self.bank
         ended = terminated | truncated
         reward = torch.where(stepped, reward, torch.zeros_like(reward))
@@ -392,6 +384,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, nn.Module):
         self.obs = next_obs
         self.option_code = torch.where(stepped[:, None], next_code, self.option_code)
         self.contains = torch.where(stepped[:, None], contains_next, self.contains)
+        self.own_contains = own_next
         self._new_decisions(decision_ended & ~ended, phi_next, d_next)
         self.option = torch.where(ended, torch.full_like(self.option, -1), self.option)
         self._act(continuing, u[:, 2:])

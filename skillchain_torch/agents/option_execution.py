@@ -18,7 +18,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.agents import native_hierarchical as _native
+from skillchain_torch.backends import hierarchical as backend
 from skillchain_torch.discovery.events import evaluate_base_events, target_indicator
 from skillchain_torch.discovery.overlap import exclude_overlap
 from skillchain_torch.policies import epsilon_greedy
@@ -63,7 +63,7 @@ class OptionExecution:
         """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's
         epsilon-greedy action by its Q-head at the current state."""
         if self.native:
-            self.action = _native.act(self.bank.q_head.weight, self.option_code, rows,
+            self.action = backend.act(self.bank.q_head.weight, self.option_code, rows,
                                       self.decision, self.option, uniforms, self.option_epsilon,
                                       self.action.clone())  # fmt: skip
             return

@@ -20,7 +20,7 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
-from skillchain_torch.agents import native_hierarchical as _native
+from skillchain_torch.backends import hierarchical as backend
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.options import FourierOptionQHead
 from skillchain_torch.policies import epsilon_greedy
@@ -91,7 +91,7 @@ class TopLevel:
         available = self.top_level_available(obs, contains)
         rows = torch.ones_like(self.active) if rows is None else rows
         if self.native:
-            q, decision = _native.choose(self.q_head.weight, phi, available, rows,
+            q, decision = backend.choose(self.q_head.weight, phi, available, rows,
                                          self.num_primitives, uniforms, self.epsilon)  # fmt: skip
             self.last_phi, self.last_q, self.last_available = phi, q, available
             return phi, decision

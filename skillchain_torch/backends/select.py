@@ -1,5 +1,16 @@
 """The one switch between the torch path and a compiled kernel.
 
+Two kinds of kernel, one place that chooses:
+
+* kernels that give the torch path's bits (FourierBasis's features, CounterRNG's draws, skill
+  chaining's bookkeeping: :mod:`.fourier`, :mod:`.rng`, :mod:`.discovery`) leave nothing to
+  choose: they run wherever built, on CPU tensors; :func:`same_bits_kernels` turns them off
+  (tests and benchmarks compare the two paths);
+* kernels that sum in an order of their own (the hierarchical agent's step, the initiation
+  classifier: :mod:`.hierarchical`, :mod:`.initiation`) are the user's choice (``native``),
+  made by :func:`compiled` and only for pieces that are exactly the built-in classes
+  (:func:`builtin_type_problems`).
+
 Example:
     >>> from skillchain_torch.options import InitiationClassifier
     >>> class Mine(InitiationClassifier):
@@ -18,9 +29,10 @@ Example:
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import contextlib
+from collections.abc import Iterator, Mapping, Sequence
 
-__all__ = ["builtin_type_problems", "compiled"]
+__all__ = ["builtin_type_problems", "compiled", "same_bits_kernels"]
 
 
 def builtin_type_problems(pieces: Mapping[str, tuple[object, type]]) -> list[str]:
@@ -50,3 +62,32 @@ def compiled(native: bool | None, needs: Mapping[str, bool],
         raise ValueError(f"the compiled path cannot run: {'; '.join(missing)}; use "
                          "native=False (or leave it None) to take the torch path")
     return not missing if native is None else bool(native)
+
+
+@contextlib.contextmanager
+def same_bits_kernels(on: bool) -> Iterator[None]:
+    """Within the block, the kernels that give the torch path's bits (features, draws,
+    discovery's bookkeeping, the Pinball step) run where built (``on``) or not at all (the torch
+    path everywhere); as they were after it.
+
+    Example:
+        >>> from skillchain_torch.backends import fourier
+        >>> with same_bits_kernels(False):
+        ...     fourier.NATIVE
+        False
+    """
+    from skillchain_torch.backends import discovery, fourier, rng  # (they import nothing here)
+    from skillchain_torch.envs.pinball import native as pinball_native
+    from skillchain_torch.envs.pinball import physics  # the env's own fast path
+
+    modules = (fourier, rng, discovery)
+    saved = [module.NATIVE for module in modules], physics.NATIVE
+    for module in modules:
+        module.NATIVE = on and module.AVAILABLE
+    physics.NATIVE = on and pinball_native.AVAILABLE
+    try:
+        yield
+    finally:
+        for module, native in zip(modules, saved[0]):
+            module.NATIVE = native
+        physics.NATIVE = saved[1]

@@ -31,7 +31,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor
 
-from skillchain_torch.discovery import native_discovery
+from skillchain_torch.backends import discovery as backend
 from skillchain_torch.options import OptionBank, OptionStatus, TerminationPredicate
 
 __all__ = ["MAX_BRANCHING", "targeting", "event_list", "evaluate_base_events",
@@ -63,8 +63,8 @@ def event_list(bank: OptionBank, num_base: int,
     A base event is listed until ``max_branching`` options target it; slot j's initiation set
     is listed once the option is LEARNED, until ``max_branching`` options target it.
     """
-    if native_discovery.applies(bank.status):
-        return native_discovery.event_list(bank.parent, bank.target_event, bank.status,
+    if backend.applies(bank.status):
+        return backend.event_list(bank.parent, bank.target_event, bank.status,
                                            num_base, max_branching)  # fmt: skip
     base, slot = targeting(bank, num_base)
     base_on = base.sum(1) < max_branching
@@ -89,8 +89,8 @@ def target_indicator(bank: OptionBank, base_fired: Tensor, contains: Tensor) -> 
 
     The same answer as :meth:`OptionBank.target_reached`, without evaluating any event again.
     """
-    if native_discovery.applies(contains, bank.status):
-        return native_discovery.target_indicator(bank.parent, bank.target_event, bank.status,
+    if backend.applies(contains, bank.status):
+        return backend.target_indicator(bank.parent, bank.target_event, bank.status,
                                                  base_fired, contains)  # fmt: skip
     chained = bank.parent >= 0
     from_parent = contains.gather(1, bank.parent.clamp(min=0))

@@ -32,8 +32,9 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.discovery import native_discovery
-from skillchain_torch.options import InitiationClassifier, OptionQHead, native_initiation
+from skillchain_torch.backends import discovery as backend
+from skillchain_torch.backends import initiation as initiation_backend
+from skillchain_torch.options import InitiationClassifier, OptionQHead
 
 __all__ = ["OUTCOMES", "ExecutionCounts", "execution_outcome", "ExecutionTrace"]
 
@@ -85,7 +86,7 @@ class ExecutionTrace:
     def start(self, rows: Tensor, slot: Tensor) -> None:
         """Agents in ``rows [P]`` start executing option ``slot [P]``: keep its weights."""
         tensors = self.q_head.slot_tensors()
-        if all(native_discovery.copy_slots(value, rows, slot, self.snapshot[name], False)
+        if all(backend.copy_slots(value, rows, slot, self.snapshot[name], False)
                for name, value in tensors.items()):  # fmt: skip
             return  # one compiled copy per tensor
         index = rows.nonzero()[:, 0]
@@ -99,8 +100,8 @@ class ExecutionTrace:
     def record(self, rows: Tensor, step: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` as step ``step [P]`` (0-based)."""
         if (self.states.dtype == torch.float64 and self.states.shape[-1] == OBS_DIM
-                and native_discovery.applies(self.states, rows)):  # fmt: skip
-            native_discovery.record(self.states, rows, step, obs)
+                and backend.applies(self.states, rows)):  # fmt: skip
+            backend.record(self.states, rows, step, obs)
             return
         index = rows.nonzero()[:, 0]
         self.states[index, step[index].clamp(max=self.max_steps - 1)] = obs[index].to(
@@ -130,8 +131,8 @@ class ExecutionTrace:
         if (classifier.native and self.states.dtype == torch.float64
                 and self.states.shape[-1] == OBS_DIM):  # fmt: skip
             touched = torch.zeros(classifier.population, classifier.slots, dtype=torch.bool)
-            native_initiation.store_executions(classifier, self.states, slot, duration,
-                                               success, failure, touched)  # fmt: skip
+            initiation_backend.store_executions(classifier.stores, self.states, slot, duration,
+                                                success, failure, touched)  # fmt: skip
             classifier.dirty |= touched
             return touched
         agents, slots, obs, labels = self.examples(slot, duration, success, failure)
@@ -142,7 +143,7 @@ class ExecutionTrace:
     def drop_updates(self, slot: Tensor, failure: Tensor) -> None:
         """Put the options of failed executions back as they were when they started."""
         tensors = self.q_head.slot_tensors()
-        if all(native_discovery.copy_slots(value, failure, slot, self.snapshot[name], True)
+        if all(backend.copy_slots(value, failure, slot, self.snapshot[name], True)
                for name, value in tensors.items()):  # fmt: skip
             return
         self.q_head.write_slots(slot, self.snapshot, failure)

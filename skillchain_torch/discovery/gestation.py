@@ -44,7 +44,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.discovery import native_discovery
+from skillchain_torch.backends import discovery as backend
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.invariant import rowwise_dot
 from skillchain_torch.modules import LinearQHead
@@ -123,7 +123,7 @@ class RecentStates:
 
     def record(self, rows: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` (the state a transition starts from)."""
-        if native_discovery.record_ring(self.states, self.steps, rows, obs):
+        if backend.record_ring(self.states, self.steps, rows, obs):
             return  # the same writes, compiled (this runs every step)
         index = rows.nonzero()[:, 0]
         if index.numel() == 0:

@@ -30,7 +30,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.discovery import native_discovery
+from skillchain_torch.backends import discovery as backend
 from skillchain_torch.options import OptionBank
 
 __all__ = ["overlap_exclusion", "exclude_overlap"]
@@ -57,8 +57,8 @@ def overlap_exclusion(bank: OptionBank) -> Tensor:
 def exclude_overlap(contains: Tensor, exclusion: Tensor, trained: Tensor) -> Tensor:
     """The effective memberships ``[P, K]``: ``contains`` minus the trained sets each option
     must avoid (``exclusion`` from :func:`overlap_exclusion`)."""
-    if native_discovery.applies(contains, exclusion):
-        return native_discovery.exclude_overlap(contains, exclusion, trained)
+    if backend.applies(contains, exclusion):
+        return backend.exclude_overlap(contains, exclusion, trained)
     blocking = contains & trained  # [P, J]
     excluded = (exclusion & blocking[:, None, :]).any(-1)
     return contains & ~excluded

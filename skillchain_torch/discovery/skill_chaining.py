@@ -45,9 +45,9 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from skillchain_torch.backends import discovery as backend
 from skillchain_torch.options import GoalEvent, OptionBank, OptionStatus, TerminationPredicate
 
-from . import native_discovery
 from .convergence import CONVERGENCE_EPISODES, CONVERGENCE_THRESHOLD, ConvergenceTest
 from .episode_rules import EpisodeRules
 from .events import MAX_BRANCHING, entered, evaluate_base_events, target_indicator
@@ -270,9 +270,9 @@ class SkillChaining(StepRules, EpisodeRules):
         self._finish_executions(option, reached, duration, decision_ended & stepped,
                                 terminated)  # fmt: skip
         sample = value  # Q(s, d) of the decision in force
-        if native_discovery.applies(contains, stepped):  # the same rules, compiled
+        if backend.applies(contains, stepped):  # the same rules, compiled
             self.gestation_q, base_trig, slot_trig, self.base_now, any_listed, hits = (
-                native_discovery.triggers(bank.parent, bank.target_event, bank.status,
+                backend.triggers(bank.parent, bank.target_event, bank.status,
                                           self.base_now, self._base_next, raw_now,
                                           raw_next, reached, stepped, sample,
                                           self.gestation_q, self.max_branching,

@@ -25,10 +25,10 @@ import logging
 import torch
 from torch import Tensor
 
+from skillchain_torch.backends import discovery as backend
 from skillchain_torch.options import OptionStatus
 from skillchain_torch.options.status import slot_mask
 
-from . import native_discovery
 from .creation import choose_creation, covered_start
 from .events import entered, event_list, target_indicator
 from .executions import execution_outcome
@@ -66,8 +66,8 @@ class StepRules:
     def _finish_executions(self, option: Tensor, reached: Tensor, duration: Tensor,
                            ended: Tensor, terminated: Tensor) -> None:  # fmt: skip
         """Examples, refits and dropped updates of the executions that ended."""
-        if native_discovery.applies(option, reached):  # the same outcomes, compiled
-            slot, success, failure, any_ended, any_failure = native_discovery.outcomes(
+        if backend.applies(option, reached):  # the same outcomes, compiled
+            slot, success, failure, any_ended, any_failure = backend.outcomes(
                 option, reached, duration, ended, terminated, self.max_option_steps,
                 self._outcomes_out)  # fmt: skip
             if not any_ended:

@@ -20,14 +20,7 @@ import math
 import torch
 from torch import Tensor, nn
 
-try:
-    from . import _fourier_native
-except ImportError:  # built without a C compiler: the torch form below serves every input
-    _fourier_native = None
-
-# CPU float64 inputs form their arguments in C (``_fourier_native.c``: the same operations in
-# the same order, so the same bits); tests switch it off to compare.
-NATIVE = _fourier_native is not None
+from skillchain_torch.backends import fourier as backend
 
 
 class FourierBasis(nn.Module):
@@ -59,14 +52,10 @@ class FourierBasis(nn.Module):
         if x.dtype != self._k.dtype:
             x = x.to(self._k.dtype)
         x = x.reshape(-1, self.dim)
+        phi = backend.features(x, self.dim, self.order, self.num_features)  # the same bits
+        if phi is not None:
+            return phi.reshape(*lead, self.num_features)
         n = x.shape[0]
-        if (NATIVE and x.device.type == "cpu" and x.dtype == torch.float64 and self.dim <= 16
-                and self.order <= 63):  # the C side's fixed-size tables
-            out = torch.empty(n, self.num_features, dtype=torch.float64)
-            s0, s1 = x.stride()
-            _fourier_native.fourier_args(n, self.dim, self.order, x.data_ptr(), s0, s1, math.pi,
-                                         out.data_ptr())
-            return out.cos_().reshape(*lead, self.num_features)
         # c . x accumulated left to right, as a sequential implementation does, but built by
         # broadcast additions of t_j[k] = x_j * k (k = 0..order): dot[c] = ((t_0[c_0] + t_1[c_1])
         # + ...), last dimension fastest. Same bits as sum_j x_j * c_j in that order, a handful

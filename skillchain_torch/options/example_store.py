@@ -25,8 +25,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.native import for_c
-from skillchain_torch.options import native_initiation
+from skillchain_torch.backends import initiation as backend
+from skillchain_torch.backends.native import for_c
 from skillchain_torch.options.examples import store_places
 from skillchain_torch.options.nearby import within_any
 from skillchain_torch.options.status import check_slot_mask
@@ -41,6 +41,14 @@ class ExampleStores:
     ``generation``, ``seeds``, ``dirty`` and settings ``capacity``, ``replacement``,
     ``keep_negatives``, ``distance``, ``distance_dims``, ``native``.
     """
+
+    @property
+    def stores(self) -> backend.Stores:
+        """The stores' buffers and settings as the compiled kernels take them (they write
+        the buffers in place)."""
+        return backend.Stores(self.examples, self.labels, self.count, self.seen,
+                              self.generation, self.seeds, self.replacement == "ring",
+                              self.keep_negatives)  # fmt: skip
 
     def _within(self, points: Tensor, examples: Tensor) -> Tensor:
         """``|point - example| <= distance`` (in ``distance_dims``) for every pair:
@@ -115,9 +123,9 @@ class ExampleStores:
         k = torch.as_tensor(slots, dtype=torch.int64, device=device).expand(n)
         if self.native:  # one compiled pass, the same places and bits
             touched = torch.zeros(self.population, self.slots, dtype=torch.bool)
-            if not native_initiation.store(self, p.contiguous(), k.contiguous(),
-                                           for_c(obs, torch.float64), for_c(labels, torch.bool),
-                                           touched):  # fmt: skip
+            if not backend.store(self.stores, p.contiguous(), k.contiguous(),
+                                 for_c(obs, torch.float64), for_c(labels, torch.bool),
+                                 touched):  # fmt: skip
                 raise ValueError(f"agent/slot indices out of range for P={self.population}, "
                                  f"K={self.slots}")  # fmt: skip
             self.dirty |= touched

@@ -26,11 +26,12 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.backends import initiation as backend
+from skillchain_torch.backends.native import for_c
 from skillchain_torch.backends.select import builtin_type_problems, compiled
 from skillchain_torch.features import PolynomialFeatures
 from skillchain_torch.invariant import rowwise_dot, rowwise_sum
-from skillchain_torch.native import for_c
-from skillchain_torch.options import initiation_fit, native_initiation
+from skillchain_torch.options import initiation_fit
 from skillchain_torch.options.example_store import ExampleStores
 from skillchain_torch.options.examples import REPLACEMENTS
 from skillchain_torch.options.logistic import logistic_sweeps
@@ -166,10 +167,11 @@ class InitiationClassifier(ExampleStores, nn.Module):
         self.native = False
 
     def set_native(self, native: bool | None = None) -> bool:
-        """Use the compiled :func:`contains` and fits (:mod:`.native_initiation`) or not;
-        ``None``: when they are built, the classifier is exactly this class (a subclass may
-        change any rule, which C would not run) and it is on the CPU in float64. Their sums
-        run in an order of their own (rounding-level differences from the torch path).
+        """Use the compiled :func:`contains` and fits (:mod:`~skillchain_torch.backends.
+        initiation`) or not; ``None``: when they are built, the classifier is exactly this
+        class (a subclass may change any rule, which C would not run) and it is on the CPU in
+        float64. Their sums run in an order of their own (rounding-level differences from the
+        torch path).
         Returns the choice; ``True`` where it cannot apply raises ``ValueError`` naming why.
 
         Example:
@@ -179,7 +181,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
         """
         w = self.weight
         self.native = compiled(native, {
-            "the compiled classifier (built)": native_initiation.AVAILABLE,
+            "the compiled classifier (built)": backend.AVAILABLE,
             f"a {OBS_DIM}-d observation": self.obs_dim == OBS_DIM,
             f"the classifier on the CPU in float64 (it is on {w.device}, {w.dtype})":
                 w.device.type == "cpu" and w.dtype == torch.float64,
@@ -237,8 +239,8 @@ class InitiationClassifier(ExampleStores, nn.Module):
         ``logit > 0`` (``sigmoid > 1/2``), and near a positive example for constrained slots."""
         if self.native:
             obs = self._check_obs(obs)
-            return native_initiation.contains(
-                self.features, self.centered, self.weight, self.bias, self.trained,
+            return backend.contains(
+                self.features.factor_index, self.centered, self.weight, self.bias, self.trained,
                 self.constrained, obs, self.examples, self.labels, self.count, self._dims,
                 self.distance)
         member = (self.logit(obs) > 0) | ~self.trained
@@ -282,10 +284,11 @@ class InitiationClassifier(ExampleStores, nn.Module):
         """
         mask = self.dirty if mask is None else check_slot_mask(mask, self.population, self.slots)
         if self.native:  # every slot in one compiled pass, the same bits
-            return native_initiation.fit(
-                self.features, self.centered, for_c(mask, torch.bool), self.examples, self.labels,
-                self.count, self.weight, self.bias, self.lr, self.sweeps, self.balanced,
-                self.sweeps_done, self.trained, self.dirty)  # fmt: skip
+            return backend.fit(
+                self.features.factor_index, self.centered, for_c(mask, torch.bool),
+                self.examples, self.labels, self.count, self.weight, self.bias, self.lr,
+                self.sweeps, self.balanced, self.sweeps_done, self.trained,
+                self.dirty)  # fmt: skip
         mask = mask.to(self.weight.device) & (self.count > 0)
         where = mask.nonzero()
         if where.shape[0] > 0:
@@ -314,7 +317,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
         """``sweeps`` gradient steps (:func:`logistic_sweeps`) on slots ``(pi, ki)`` over their
         first ``length`` stored places."""
         count = self.count[pi, ki]
-        sweeps = native_initiation.logistic_sweeps if self.native else logistic_sweeps
+        sweeps = backend.logistic_sweeps if self.native else logistic_sweeps
         params = sweeps(
             self.phi(self.examples[pi, ki, :length]),
             self.labels[pi, ki, :length],

@@ -75,7 +75,7 @@ def sweep_terms(x: Tensor, labels: Tensor, stored: Tensor, lr: float,
     ``x1 [M, L, F + 1]``: the features with a constant 1 appended (the intercept's);
     ``step [M, L]``: ``lr`` times each example's weight in the loss (0 for empty places);
     ``minus_step_y``: ``-(step * y)``. Shared with the compiled sweeps
-    (:mod:`~skillchain_torch.options.native_initiation`), which start from the same numbers.
+    (:mod:`~skillchain_torch.backends.initiation`), which start from the same numbers.
     """
     x = torch.cat([x, torch.ones_like(x[..., :1])], dim=-1)  # [M, L, F + 1]
     y = labels.to(x.dtype)

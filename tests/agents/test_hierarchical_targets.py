@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from skillchain_torch.agents import HierarchicalAgent
-from skillchain_torch.discovery import native_discovery
+from skillchain_torch.backends import discovery as native_discovery
 from skillchain_torch.options import GoalEvent, OptionBank, OptionStatus, RegionEvent
 
 F64 = torch.float64

@@ -7,7 +7,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from skillchain_torch.agents import HierarchicalAgent, native_hierarchical
+from skillchain_torch.agents import HierarchicalAgent
+from skillchain_torch.backends import hierarchical as native_hierarchical
 from skillchain_torch.objectives import option_update_mask
 from skillchain_torch.options import (
     FourierOptionQHead,

@@ -111,7 +111,7 @@ def test_compiled_path_refuses_a_user_head_by_name():
     bank = OptionBank.build(1, 2, order=1)
     agent = HierarchicalAgent(bank, order=1, q_head=ParameterLinearHead(16, 7, 1))
     assert agent.native is False
-    from skillchain_torch.agents.native_hierarchical import AVAILABLE
+    from skillchain_torch.backends.hierarchical import AVAILABLE
 
     if AVAILABLE:
         with pytest.raises(ValueError, match="the top-level head is ParameterLinearHead"):

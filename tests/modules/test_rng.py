@@ -8,6 +8,7 @@ import torch
 
 import skillchain_torch.invariant
 import skillchain_torch.rng
+from skillchain_torch.backends import rng as rng_backend
 from skillchain_torch.rng import CounterRNG, logical_rshift, splitmix64
 
 MASK = 2**64 - 1
@@ -161,7 +162,7 @@ def test_state_dict_roundtrip():
     assert restored.stream == 2 and repr(restored) == "CounterRNG(population=4, stream=2)"
 
 
-@pytest.mark.skipif(not skillchain_torch.rng.NATIVE, reason="the compiled draw was not built")
+@pytest.mark.skipif(not rng_backend.AVAILABLE, reason="the compiled draw was not built")
 @pytest.mark.parametrize("stream", [0, 1, 7])
 def test_compiled_draws_equal_the_tensor_path(stream, monkeypatch):
     """The C draw gives the tensor path's words and uniforms bit for bit, counters included."""
@@ -169,7 +170,7 @@ def test_compiled_draws_equal_the_tensor_path(stream, monkeypatch):
     mask = torch.tensor([True, False, True, True, False, True])
 
     def draws(native):
-        monkeypatch.setattr(skillchain_torch.rng, "NATIVE", native)
+        monkeypatch.setattr(rng_backend, "NATIVE", native)
         rng = CounterRNG(seeds, stream=stream, counter=torch.tensor([0, 5, 2**40, 9, 1, 2**62]))
         out = [rng.bits(3), rng.uniform(4, mask=mask), rng.uniform(1), rng.bits(2, mask=mask)]
         return out, rng.counter

@@ -337,7 +337,7 @@ def test_distance_constraint_same_bits_alone_in_a_population_and_when_drawn():
 def test_keep_negatives_never_lets_positives_evict_failures(replacement, native):
     """A full store under keep_negatives: positives replace only positives, so every negative
     stays (without it, 2,000 positives leave about none of 5 negatives in a store of 50)."""
-    from skillchain_torch.options import native_initiation
+    from skillchain_torch.backends import initiation as native_initiation
 
     if native and not native_initiation.AVAILABLE:
         pytest.skip("compiled classifier not built")
@@ -366,7 +366,7 @@ def test_keep_negatives_never_lets_positives_evict_failures(replacement, native)
 
 
 def test_keep_negatives_same_stores_torch_and_compiled_with_mixed_batches():
-    from skillchain_torch.options import native_initiation
+    from skillchain_torch.backends import initiation as native_initiation
 
     if not native_initiation.AVAILABLE:
         pytest.skip("compiled classifier not built")

@@ -19,6 +19,7 @@ import skillchain_torch.interfaces as interfaces
 import skillchain_torch.options.initiation_fit as initiation_fit
 import skillchain_torch.options.io as options_io
 from skillchain_torch.agents import HierarchicalAgent, SkillChainingAgent
+from skillchain_torch.backends.initiation import AVAILABLE as NATIVE_BUILT
 from skillchain_torch.interfaces import InitiationSet, OptionHead, ValueHead, missing_methods
 from skillchain_torch.invariant import rowwise_dot
 from skillchain_torch.modules import LinearQHead
@@ -30,7 +31,6 @@ from skillchain_torch.options import (
     register_classifier,
     register_q_head,
 )
-from skillchain_torch.options.native_initiation import AVAILABLE as NATIVE_BUILT
 from skillchain_torch.trainers.option_monitor import initiation_density
 
 F64 = torch.float64

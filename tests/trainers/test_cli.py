@@ -148,7 +148,7 @@ def test_console_script_help():
 
 def test_torch_only_run_resumes_only_as_torch_only(tmp_path, capsys):
     """--torch-only is recorded in run_info.json, and its checkpoints refuse the other kind."""
-    from skillchain_torch.agents import native_hierarchical
+    from skillchain_torch.backends import hierarchical as native_hierarchical
 
     out = tmp_path / "run"
     argv = ["train", "--agent", "skill-chaining", "--slots", "2", "--out", str(out), *SMALL]

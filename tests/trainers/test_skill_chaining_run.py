@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from skillchain_torch.agents import SkillChainingAgent, native_hierarchical
+from skillchain_torch.agents import SkillChainingAgent
+from skillchain_torch.backends import hierarchical as native_hierarchical
 from skillchain_torch.options import OptionBank, OptionStatus
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 from skillchain_torch.trainers.checkpoint import load_checkpoint

@@ -59,8 +59,8 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_fourier_native",
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_fourier",
                                     "Compiled Fourier-basis arguments (see fourier.py).", -1,
                                     methods};
 
-PyMODINIT_FUNC PyInit__fourier_native(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__fourier(void) { return PyModule_Create(&module); }

@@ -1,6 +1,6 @@
 /* Arithmetic shared by the compiled kernels (trainers/_sarsa_native.c,
- * skillchain_torch/agents/_hierarchical_native.c, skillchain_torch/options/_initiation_native.c,
- * skillchain_torch/_rng_native.c).
+ * skillchain_torch/backends/_hierarchical.c, skillchain_torch/backends/_initiation.c,
+ * skillchain_torch/backends/_rng.c).
  *
  * dot: eight interleaved partial sums in a fixed order, so a value depends only on its two
  * vectors (not on the batch, the alignment or the other agents). It differs from torch's
@@ -28,7 +28,7 @@
  * run four lanes wide where the CPU has them. The bits stay the same: each of dot's eight
  * partial sums keeps its own order in any lane, and no multiply-add is fused (AVX2 alone
  * brings no FMA, and -ffp-contract=off). -DSKILLCHAIN_NO_CLONES builds the plain x86-64 code only
- * (tests/test_native_clones.py compares the two). */
+ * (tests/backends/test_native_clones.py compares them). */
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) \
     && !defined(SKILLCHAIN_NO_CLONES)
 #define NATIVE_CLONES __attribute__((target_clones("avx2", "default")))

@@ -1,16 +1,12 @@
-"""The compiled skill-chaining bookkeeping (native_discovery) gives the torch path's bits."""
+"""The compiled skill-chaining bookkeeping (backends/discovery.py) gives the torch path's bits."""
 
 import doctest
 
 import pytest
 import torch
 
-from skillchain_torch.discovery import (
-    InitiationReading,
-    RecentStates,
-    SkillChaining,
-    native_discovery,
-)
+from skillchain_torch.backends import discovery as native_discovery
+from skillchain_torch.discovery import InitiationReading, RecentStates, SkillChaining
 from skillchain_torch.discovery.events import event_list, target_indicator
 from skillchain_torch.discovery.executions import ExecutionTrace
 from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion

@@ -1,4 +1,4 @@
-"""The hierarchical agent's compiled step (native_hierarchical) against the library pieces.
+"""The hierarchical agent's compiled step (backends/hierarchical.py) against the library pieces.
 
 Each kernel takes the same decisions from the same uniforms as the pieces it mirrors, and its
 values and weights agree to rounding (its sums run in their own order). The agents built on
@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 import torch
 
-from skillchain_torch.agents import HierarchicalAgent, SkillChainingAgent, native_hierarchical
+from skillchain_torch.agents import HierarchicalAgent, SkillChainingAgent
+from skillchain_torch.agents.step_state import STEP_FIELDS, StepState
+from skillchain_torch.backends import hierarchical as native_hierarchical
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import FourierOptionQHead, MLPOptionQHead, OptionBank, OptionStatus
 from skillchain_torch.policies import epsilon_greedy
@@ -37,14 +39,14 @@ def test_built_in_ci():
     import os
 
     if os.environ.get("CI"):
-        assert native_hierarchical.AVAILABLE, "skillchain_torch.agents._hierarchical_native failed"
+        assert native_hierarchical.AVAILABLE, "skillchain_torch.backends._hierarchical failed"
 
 
 def test_doctest():
-    from skillchain_torch import native
+    from skillchain_torch.agents import compiled_step, step_state
 
-    assert doctest.testmod(native_hierarchical).failed == 0
-    assert doctest.testmod(native).failed == 0
+    for module in (native_hierarchical, step_state, compiled_step):
+        assert doctest.testmod(module).failed == 0, module.__name__
 
 
 @needs_native
@@ -154,6 +156,30 @@ def test_compiled_transition_agrees_with_the_torch_path(gamma, scaled, intra, in
     close(agents[1].q_head.weight, agents[0].q_head.weight)
     close(agents[1].bank.q_head.weight, agents[0].bank.q_head.weight)
     assert bool(seen_options)  # options ran
+
+
+@needs_native
+def test_compiled_step_takes_and_returns_the_declared_state():
+    """The backend reads the agent's StepState and returns the state at s' (fresh tensors
+    but for the three arrays it updates in place); the agent's fields are that state's."""
+    P = 4
+    agent = HierarchicalAgent(half_plane_bank(P, seed=1), order=2, seed=3, native=True,
+                              intra_option_primitives=True)  # fmt: skip
+    start = torch.rand(P, 4, dtype=F64, generator=gen(0))
+    agent.begin(start)
+    before = agent.step_state
+    kept = {name: getattr(before, name).clone() for name in STEP_FIELDS}
+    next_obs = torch.rand(P, 4, dtype=F64, generator=gen(1))
+    agent.observe(next_obs, torch.full((P,), -1.0, dtype=F64))
+    after = agent.step_state
+    assert type(after) is StepState and after is not before
+    assert torch.equal(after.obs, next_obs) and torch.equal(before.obs, kept["obs"])
+    in_place = {"option_code", "decision_phi", "state_phi"}
+    for name in STEP_FIELDS:
+        assert (getattr(after, name) is getattr(before, name)) == (name in in_place), name
+        assert getattr(agent, name) is getattr(after, name)
+    # a decision either ended (a fresh one starts at 0) or went on one step longer
+    assert bool(((after.duration == 0) | (after.duration == kept["duration"] + 1)).all())
 
 
 # ---------------------------------------------------------------------------- agents

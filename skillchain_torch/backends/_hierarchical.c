@@ -1,4 +1,4 @@
-/* The hierarchical agent's per-step arithmetic, compiled (see native_hierarchical.py).
+/* The hierarchical agent's per-step arithmetic, compiled (see hierarchical.py).
  *
  * Why it exists: with options live, a HierarchicalAgent step at P = 100 spent ~4 ms in about
  * sixty small tensor operations: top-level values of the available decisions and the
@@ -353,8 +353,8 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_hierarchical_native",
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_hierarchical",
                                     "Compiled hierarchical agent step (see "
-                                    "native_hierarchical.py).", -1, methods};
+                                    "hierarchical.py).", -1, methods};
 
-PyMODINIT_FUNC PyInit__hierarchical_native(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__hierarchical(void) { return PyModule_Create(&module); }

@@ -2,7 +2,7 @@
 arrays reach C contiguous and of the kernel's dtype (:func:`for_c`).
 
 The flat agent (:mod:`skillchain_torch.trainers.native_sarsa`) and the hierarchical agents
-(:mod:`skillchain_torch.agents.native_hierarchical`) each have a torch path and a compiled
+(:mod:`skillchain_torch.backends.hierarchical`) each have a torch path and a compiled
 one. Their sums run in different orders, so a run saved by one kind and continued by the other
 would match neither an uninterrupted torch run nor an uninterrupted compiled one. Agents store
 their kind in their state (``"native"``) and refuse a state of the other kind.

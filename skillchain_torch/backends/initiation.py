@@ -1,4 +1,4 @@
-"""The initiation classifier's memberships and fits in C (``_initiation_native.c``).
+"""The initiation classifier's memberships and fits in C (``_initiation.c``).
 
 :class:`~skillchain_torch.options.InitiationClassifier` uses these when its ``native`` flag is
 on (the skill-chaining agent turns it on with its own compiled kernels, on CPU float64):
@@ -33,37 +33,54 @@ Example:
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import torch
 from torch import Tensor
 
-from skillchain_torch.features import PolynomialFeatures
-from skillchain_torch.native import for_c
+from skillchain_torch.backends.native import for_c
 from skillchain_torch.options.examples import RESERVOIR_STREAM
 from skillchain_torch.options.logistic import sweep_terms
 
 try:
-    from skillchain_torch.options import _initiation_native as _c
+    from skillchain_torch.backends import _initiation as _c
 except ImportError:  # built without a C compiler: the classifier keeps its torch path
     _c = None
 
-__all__ = ["AVAILABLE", "contains", "exp", "fit", "logistic_sweeps", "store", "store_executions"]
+__all__ = ["AVAILABLE", "Stores", "contains", "exp", "fit", "logistic_sweeps", "store",
+           "store_executions"]
 
 AVAILABLE = _c is not None
 OBS_DIM = 4
 
 
-def contains(features: PolynomialFeatures, centered: bool, weight: Tensor, bias: Tensor,
+class Stores(NamedTuple):
+    """A classifier's example stores as the kernels read and write them (in place): the
+    buffers of :class:`~skillchain_torch.options.example_store.ExampleStores` (``stores``)."""
+
+    examples: Tensor  #: ``[P, K, C, 4]`` float64
+    labels: Tensor  #: ``[P, K, C]`` bool
+    count: Tensor  #: ``[P, K]`` int64: examples stored
+    seen: Tensor  #: ``[P, K]`` int64: examples ever added
+    generation: Tensor  #: ``[P, K]`` int64: resets of the slot (the reservoir's draws use it)
+    seeds: Tensor  #: ``[P]`` int64: the agents' seeds (the reservoir's draws use them)
+    ring: bool  #: ``replacement == "ring"`` (the newest C), else the reservoir
+    keep_negatives: bool  #: a positive never replaces a stored negative
+
+
+def contains(factors: Tensor, centered: bool, weight: Tensor, bias: Tensor,
              trained: Tensor, constrained: Tensor, obs: Tensor, examples: Tensor,
              labels: Tensor, count: Tensor, dims: Tensor, distance: float) -> Tensor:  # fmt: skip
     """``BoolTensor [P, K]``: the classifier's membership rule for ``obs [P, 4]``.
 
-    ``features``: the classifier's :class:`PolynomialFeatures` (computed here, with the same
-    bits, of ``2 obs - 1`` if ``centered``); the others are its parameters and stores as they
-    are (contiguous CPU float64; ``dims``: bool ``[4]``, the distance's dims).
+    ``factors``: the ``factor_index`` of the classifier's :class:`~skillchain_torch.features.
+    PolynomialFeatures` (computed here, with the same bits, of ``2 obs - 1`` if ``centered``);
+    the others are its parameters and stores as they are (contiguous CPU float64; ``dims``:
+    bool ``[4]``, the distance's dims).
     """
     P, K, F = weight.shape
     out = torch.empty(P, K, dtype=torch.bool)
-    obs, factors = obs.contiguous(), features.factor_index
+    obs = obs.contiguous()
     _c.contains(P, K, F, examples.shape[2], factors.data_ptr(), factors.shape[1], centered,
                 weight.data_ptr(), bias.data_ptr(), trained.data_ptr(), constrained.data_ptr(),
                 obs.data_ptr(), examples.data_ptr(), labels.data_ptr(), count.data_ptr(),
@@ -84,7 +101,7 @@ def logistic_sweeps(x: Tensor, labels: Tensor, stored: Tensor, params: Tensor, l
     return -v
 
 
-def fit(features: PolynomialFeatures, centered: bool, mask: Tensor, examples: Tensor,
+def fit(factors: Tensor, centered: bool, mask: Tensor, examples: Tensor,
         labels: Tensor, count: Tensor, weight: Tensor, bias: Tensor, lr: float, sweeps: int,
         balanced: bool, sweeps_done: Tensor, trained: Tensor, dirty: Tensor) -> Tensor:
     """``sweeps`` gradient steps for every slot in ``mask [P, K]`` (bool) holding data, on its
@@ -92,7 +109,7 @@ def fit(features: PolynomialFeatures, centered: bool, mask: Tensor, examples: Te
     slots' ``sweeps_done``, ``trained`` and ``dirty``; the other arguments are the classifier's
     stores as they are (contiguous CPU). Returns the ``[P, K]`` mask of slots fitted."""
     P, K, F = weight.shape
-    factors, mask = features.factor_index, mask.contiguous()
+    mask = mask.contiguous()
     fitted = torch.empty(P, K, dtype=torch.bool)
     _c.fit(P, K, examples.shape[2], F, factors.data_ptr(), factors.shape[1], centered,
            mask.data_ptr(), examples.data_ptr(), labels.data_ptr(), count.data_ptr(),
@@ -102,37 +119,36 @@ def fit(features: PolynomialFeatures, centered: bool, mask: Tensor, examples: Te
     return fitted
 
 
-def _stores(classifier, touched: Tensor) -> tuple:
-    """The classifier's store arguments of the C ``store`` functions, in their order."""
-    return (classifier.seeds.data_ptr(), classifier.generation.data_ptr(), RESERVOIR_STREAM,
-            int(classifier.replacement == "ring") | (int(classifier.keep_negatives) << 1),
-            classifier.seen.data_ptr(),
-            classifier.examples.data_ptr(), classifier.labels.data_ptr(),
-            classifier.count.data_ptr(), touched.data_ptr())  # fmt: skip
+def _stores(stores: Stores, touched: Tensor) -> tuple:
+    """The store arguments of the C ``store`` functions, in their order."""
+    return (stores.seeds.data_ptr(), stores.generation.data_ptr(), RESERVOIR_STREAM,
+            int(stores.ring) | (int(stores.keep_negatives) << 1), stores.seen.data_ptr(),
+            stores.examples.data_ptr(), stores.labels.data_ptr(), stores.count.data_ptr(),
+            touched.data_ptr())  # fmt: skip
 
 
-def store(classifier, agents: Tensor, slots: Tensor, obs: Tensor, labels: Tensor,
+def store(stores: Stores, agents: Tensor, slots: Tensor, obs: Tensor, labels: Tensor,
           touched: Tensor) -> bool:  # fmt: skip
     """Store examples ``obs [N, 4]`` (float64) with ``labels [N]`` (bool) for
-    ``(agents, slots)`` (int64 ``[N]``) in ``classifier``'s stores, in order, marking
-    ``touched [P, K]`` (bool). False (nothing written) if an index is out of range."""
-    P, K, C = classifier.labels.shape
+    ``(agents, slots)`` (int64 ``[N]``) in ``stores``, in order, marking ``touched [P, K]``
+    (bool). False (nothing written) if an index is out of range."""
+    P, K, C = stores.labels.shape
     status = _c.store(P, K, C, agents.shape[0], agents.data_ptr(), slots.data_ptr(),
-                      obs.data_ptr(), labels.data_ptr(), *_stores(classifier, touched))
+                      obs.data_ptr(), labels.data_ptr(), *_stores(stores, touched))
     return status == 0
 
 
-def store_executions(classifier, states: Tensor, slot: Tensor, duration: Tensor,
+def store_executions(stores: Stores, states: Tensor, slot: Tensor, duration: Tensor,
                      success: Tensor, failure: Tensor, touched: Tensor) -> int:  # fmt: skip
     """The examples of ended executions (see ``ExecutionTrace.examples``: the first
     ``duration`` states ``[P, T, 4]`` of a success, the first of a failure) stored in slot
     ``slot [P]`` of each agent, marking ``touched [P, K]``; the number of examples."""
-    P, K, C = classifier.labels.shape
+    P, K, C = stores.labels.shape
     slot, duration = for_c(slot, torch.int64), for_c(duration, torch.int64)
     success, failure = for_c(success, torch.bool), for_c(failure, torch.bool)
     return _c.store_executions(P, K, C, states.shape[1], states.data_ptr(), slot.data_ptr(),
                                duration.data_ptr(), success.data_ptr(), failure.data_ptr(),
-                               *_stores(classifier, touched))  # fmt: skip
+                               *_stores(stores, touched))  # fmt: skip
 
 
 def exp(x: Tensor) -> Tensor:

@@ -1,7 +1,7 @@
 """The agent kernels give the same bits whichever CPU runs them.
 
-setup.py builds the agent kernels twice over (``NATIVE_CLONES`` in native_maths.h: AVX2 and
-plain x86-64, picked when the module loads). Here the same sources are compiled again with
+setup.py builds the agent kernels twice over (``NATIVE_CLONES`` in backends/native_maths.h:
+AVX2 and plain x86-64, picked when the module loads). Here the same sources are compiled again with
 ``-DSKILLCHAIN_NO_CLONES`` (plain x86-64 only), swapped in, and short skill-chaining and flat
 runs must leave checkpoints identical to those of the installed build, which on an AVX2
 machine is the AVX2 code.
@@ -21,15 +21,16 @@ from pathlib import Path
 import pytest
 import torch
 
-from skillchain_torch.agents import SkillChainingAgent, native_hierarchical
+from skillchain_torch.agents import SkillChainingAgent
+from skillchain_torch.backends import hierarchical, initiation
 from skillchain_torch.backends import sarsa as native_sarsa
-from skillchain_torch.options import OptionBank, native_initiation
+from skillchain_torch.options import OptionBank
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 KERNELS = {  # module holding the compiled handle -> its source
-    native_initiation: "skillchain_torch/options/_initiation_native.c",
-    native_hierarchical: "skillchain_torch/agents/_hierarchical_native.c",
+    initiation: "skillchain_torch/backends/_initiation.c",
+    hierarchical: "skillchain_torch/backends/_hierarchical.c",
     native_sarsa: "skillchain_torch/backends/_sarsa.c",
 }
 COMPILER = shutil.which(sysconfig.get_config_var("CC").split()[0] if sysconfig.get_config_var(
@@ -53,8 +54,8 @@ def build_plain(tmp_path: Path) -> dict:
         name = Path(source).stem
         target = tmp_path / f"{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
         subprocess.run([COMPILER, "-shared", "-fPIC", *flags, "-DSKILLCHAIN_NO_CLONES",
-                        f"-I{include}", f"-I{ROOT / 'skillchain_torch'}", str(ROOT / source),
-                        "-o", str(target), "-lm"], check=True)  # fmt: skip
+                        f"-I{include}", f"-I{ROOT / 'skillchain_torch' / 'backends'}",
+                        str(ROOT / source), "-o", str(target), "-lm"], check=True)  # fmt: skip
         spec = importlib.util.spec_from_file_location(name, target)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)

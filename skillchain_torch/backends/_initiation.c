@@ -1,4 +1,4 @@
-/* The initiation classifier's costly pieces, compiled (see native_initiation.py).
+/* The initiation classifier's costly pieces, compiled (see initiation.py).
  *
  * Why it exists: a skill-chaining step asks every slot of every agent whether it holds the new
  * state (a 15-feature logit, then for learned options a distance test against up to C stored
@@ -501,8 +501,8 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_initiation_native",
-                                    "Compiled initiation classifier (see native_initiation.py).",
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_initiation",
+                                    "Compiled initiation classifier (see initiation.py).",
                                     -1, methods};
 
-PyMODINIT_FUNC PyInit__initiation_native(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__initiation(void) { return PyModule_Create(&module); }

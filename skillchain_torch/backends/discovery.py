@@ -1,4 +1,4 @@
-"""Skill chaining's per-step bookkeeping in C (``_discovery_native.c``), the same bits.
+"""Skill chaining's per-step bookkeeping in C (``_discovery.c``), the same bits.
 
 The discovery pieces call these for CPU tensors when the extension is built (:data:`NATIVE`,
 a switch tests turn off to compare): :func:`~.events.target_indicator`,
@@ -22,17 +22,20 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.native import for_c
+from skillchain_torch.backends.native import for_c
 
 try:
-    from skillchain_torch.discovery import _discovery_native as _c
+    from skillchain_torch.backends import _discovery as _c
 except ImportError:  # built without a C compiler: the torch path
     _c = None
 
-__all__ = ["NATIVE", "applies", "target_indicator", "event_list", "exclude_overlap", "record",
-           "record_ring", "copy_slots", "outcomes", "triggers"]
+__all__ = ["AVAILABLE", "NATIVE", "applies", "target_indicator", "event_list", "exclude_overlap",
+           "record", "record_ring", "copy_slots", "outcomes", "triggers"]
 
-NATIVE = _c is not None
+AVAILABLE = _c is not None
+# On wherever built (the same bits: no choice to make); tests and benchmarks switch it off
+# (skillchain_torch.backends.select.same_bits_kernels).
+NATIVE = AVAILABLE
 
 
 OBS_DIM = 4  # the ring and trace kernels copy Pinball's 4 numbers a state

@@ -49,7 +49,7 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_rng_native",
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_rng",
                                     "Compiled CounterRNG draws (see rng.py).", -1, methods};
 
-PyMODINIT_FUNC PyInit__rng_native(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__rng(void) { return PyModule_Create(&module); }

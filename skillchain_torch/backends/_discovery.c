@@ -1,4 +1,4 @@
-/* Skill chaining's per-step bookkeeping, compiled (see native_discovery.py).
+/* Skill chaining's per-step bookkeeping, compiled (see discovery.py).
  *
  * Why it exists: every step, skill chaining derives each option's target event at s', the
  * no-overlap memberships, the events a transition triggered, the gestating options' samples
@@ -271,8 +271,8 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_discovery_native",
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_discovery",
                                     "Compiled skill-chaining bookkeeping (see "
-                                    "native_discovery.py).", -1, methods};
+                                    "discovery.py).", -1, methods};
 
-PyMODINIT_FUNC PyInit__discovery_native(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__discovery(void) { return PyModule_Create(&module); }

@@ -1,4 +1,4 @@
-"""The compiled initiation classifier (native_initiation) against its torch path.
+"""The compiled initiation classifier (backends/initiation.py) against its torch path.
 
 Memberships are booleans: the compiled logit and distances differ from torch's only in the last
 bits, so on random states the two agree exactly. Fits agree to rounding.
@@ -10,7 +10,8 @@ import functools
 import pytest
 import torch
 
-from skillchain_torch.options import InitiationClassifier, native_initiation
+from skillchain_torch.backends import initiation as native_initiation
+from skillchain_torch.options import InitiationClassifier
 from skillchain_torch.options.logistic import logistic_sweeps
 
 F64 = torch.float64
@@ -24,7 +25,7 @@ def test_built_in_ci():
     import os
 
     if os.environ.get("CI"):
-        assert native_initiation.AVAILABLE, "skillchain_torch.options._initiation_native failed"
+        assert native_initiation.AVAILABLE, "skillchain_torch.backends._initiation failed"
 
 
 def test_doctest():
