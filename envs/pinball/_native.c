@@ -1,9 +1,10 @@
-/* The Pinball step of envs/pinball/scalar.py (step_one + substeps), compiled, for a batch of balls.
+/* The Pinball step of envs/pinball/physics.py, compiled, for a batch of balls: the env's
+ * documented fast path (physics.NATIVE).
  *
- * Why it exists: the Python-float step costs 15-20 us a ball, which made the physics about two
+ * Why it exists: a Python-float step cost 15-20 us a ball, which made the physics about two
  * thirds of a population trainer's step; this loop costs well under a microsecond a ball.
  *
- * Why it is bit-identical to scalar.py and to the batched torch path: it performs the same
+ * Why it is bit-identical to the batched torch path: it performs the same
  * IEEE-double operations (+ - * / and one sqrt, all correctly rounded) in the same order, and
  * setup.py compiles it with -ffp-contract=off so that no multiply-add is fused. The tests step
  * random rollouts through both and compare every bit.
@@ -56,7 +57,7 @@ static long cell_of(const Board *b, double x, double y)
     return (long)j * b->g + (long)i;
 }
 
-/* Substeps 0..19 near the candidate edges; returns 1 at the goal (scalar.py: substeps). */
+/* Substeps 0..19 near the candidate edges; returns 1 at the goal (physics.py's substeps). */
 static int substeps(const Board *b, double *px, double *py, double *pvx, double *pvy,
                     const double **cand, int n_cand, int64_t *events)
 {
@@ -113,7 +114,7 @@ static int substeps(const Board *b, double *px, double *py, double *pvx, double 
     return 0;
 }
 
-/* One step of one ball (scalar.py: step_one); returns 1 at the goal. */
+/* One step of one ball (physics.py's step, one row); returns 1 at the goal. */
 static int step_one(const Board *b, double *s, int64_t action, int64_t *events)
 {
     double x = s[0], y = s[1];

@@ -4,7 +4,7 @@
 restart_rows, start_obs)``, ``compact(keep)``, ``actions``, ``index``, ``flush()``: a mixin of
 :class:`~skillchain_torch.agents.HierarchicalAgent` that maps the trainer's compact rows onto
 the agent's P rows and calls its :meth:`transition` (the flat agent,
-:class:`~skillchain_torch.trainers.flat.FlatSarsaAgent`, keeps the same protocol).
+:class:`~skillchain_torch.agents.FlatSarsaAgent`, keeps the same protocol).
 
 Example:
     >>> from skillchain_torch.agents import HierarchicalAgent

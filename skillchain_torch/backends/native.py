@@ -1,7 +1,7 @@
 """What the compiled kernels' Python sides share: a state resumes only on its own kind, and
 arrays reach C contiguous and of the kernel's dtype (:func:`for_c`).
 
-The flat agent (:mod:`skillchain_torch.trainers.native_sarsa`) and the hierarchical agents
+The flat agent (:mod:`skillchain_torch.backends.sarsa`) and the hierarchical agents
 (:mod:`skillchain_torch.backends.hierarchical`) each have a torch path and a compiled
 one. Their sums run in different orders, so a run saved by one kind and continued by the other
 would match neither an uninterrupted torch run nor an uninterrupted compiled one. Agents store

@@ -1,4 +1,4 @@
-/* Arithmetic shared by the compiled kernels (trainers/_sarsa_native.c,
+/* Arithmetic shared by the compiled kernels (skillchain_torch/backends/_sarsa.c,
  * skillchain_torch/backends/_hierarchical.c, skillchain_torch/backends/_initiation.c,
  * skillchain_torch/backends/_rng.c).
  *
