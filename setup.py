@@ -6,8 +6,9 @@
   beside its glue (``_sarsa.c``: the flat Sarsa agent's per-step arithmetic; ``_fourier.c``:
   FourierBasis's arguments, same bits; ``_rng.c``: CounterRNG's draws, same bits;
   ``_discovery.c``: skill chaining's bookkeeping, same bits; ``_initiation.c``: initiation-set
-  memberships and fits; ``_hierarchical.c``: the hierarchical agent's per-step arithmetic:
-  top-level choice and SMDP update, option actions, intra-option updates).
+  memberships and fits; ``_stores.c``: their example stores, same bits; ``_hierarchical.c``:
+  the hierarchical agent's per-step arithmetic: top-level choice and SMDP update, option
+  actions, intra-option updates).
 
 The agent kernels and the random draws share ``skillchain_torch/backends/native_maths.h`` (dot
 products, epsilon-greedy, the sweeps' exponential, SplitMix64).
@@ -46,6 +47,7 @@ setup(
         backend("discovery", extra_compile_args=FLAGS, optional=True),
         backend("sarsa", **SHARED),
         backend("initiation", **SHARED),
+        backend("stores", **SHARED),
         backend("hierarchical", **SHARED),
     ]
 )

@@ -44,8 +44,9 @@ from skillchain_torch.options.logistic import sweep_terms
 
 try:
     from skillchain_torch.backends import _initiation as _c
+    from skillchain_torch.backends import _stores as _stores_c
 except ImportError:  # built without a C compiler: the classifier keeps its torch path
-    _c = None
+    _c = _stores_c = None
 
 __all__ = ["AVAILABLE", "Stores", "contains", "exp", "fit", "logistic_sweeps", "store",
            "store_executions"]
@@ -133,7 +134,7 @@ def store(stores: Stores, agents: Tensor, slots: Tensor, obs: Tensor, labels: Te
     ``(agents, slots)`` (int64 ``[N]``) in ``stores``, in order, marking ``touched [P, K]``
     (bool). False (nothing written) if an index is out of range."""
     P, K, C = stores.labels.shape
-    status = _c.store(P, K, C, agents.shape[0], agents.data_ptr(), slots.data_ptr(),
+    status = _stores_c.store(P, K, C, agents.shape[0], agents.data_ptr(), slots.data_ptr(),
                       obs.data_ptr(), labels.data_ptr(), *_stores(stores, touched))
     return status == 0
 
@@ -146,7 +147,7 @@ def store_executions(stores: Stores, states: Tensor, slot: Tensor, duration: Ten
     P, K, C = stores.labels.shape
     slot, duration = for_c(slot, torch.int64), for_c(duration, torch.int64)
     success, failure = for_c(success, torch.bool), for_c(failure, torch.bool)
-    return _c.store_executions(P, K, C, states.shape[1], states.data_ptr(), slot.data_ptr(),
+    return _stores_c.store_executions(P, K, C, states.shape[1], states.data_ptr(), slot.data_ptr(),
                                duration.data_ptr(), success.data_ptr(), failure.data_ptr(),
                                *_stores(stores, touched))  # fmt: skip
 
