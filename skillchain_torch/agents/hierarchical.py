@@ -313,9 +313,6 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         if not self.all_stepped(stepped):  # (with every agent stepped the masks change nothing)
             terminated, truncated = terminated & stepped, truncated & stepped
             next_obs = torch.where(stepped[:, None], next_obs, self.obs)
-        # The options learning from s: the executing one, and those whose own sets hold s.
-        learn = option_update_mask(self.own_contains, self.option,
-                                   self.bank.live() & stepped[:, None])  # fmt: skip
         contains_next = self.membership(next_obs)
         reached = self.targets(next_obs, terminated, contains_next)
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
@@ -323,14 +320,15 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         if self.native:  # the rest in one compiled pass, on the declared StepState
             info = self._compiled_transition(backend.AtNext(
                 next_obs, reward, terminated, truncated, stepped, contains_next, reached, u,
-                *self._encode_next(next_obs), learn=learn))
+                *self._encode_next(next_obs)))
             self.own_contains = own_next
             return info
         bank = self.bank
         ended = terminated | truncated
         reward = torch.where(stepped, reward, torch.zeros_like(reward))
-        # Intra-option Q-learning (on-policy and off-policy, objectives.option_update_mask)
+        # Intra-option Q-learning: the executing option, and those whose own sets hold s
         phi_next, next_code = self._encode(next_obs)
+        learn = option_update_mask(self.own_contains, self.option, bank.live() & stepped[:, None])
         option_delta = self.option_update(
             bank.q_head, self.obs, self.action, reward, next_obs, terminated, learn, reached,
             code=self.option_code, next_code=next_code,

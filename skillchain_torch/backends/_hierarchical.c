@@ -159,7 +159,7 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  *      max_option_steps, alpha_o, completion, step, step_stride, executable_from,
  *      out_obs, out_code, out_contains, out_phi, out_decision, out_option, out_action,
  *      out_ret, out_duration, q, d_next, decision_ended, option_delta, smdp_delta,
- *      info_duration, info_return, started, value, fail_boot, state_phi, interrupt, learn)
+ *      info_duration, info_return, started, value, fail_boot, state_phi, interrupt, own)
  *
  * HierarchicalAgent.transition for every row, given what needs torch or Python at s'
  * (memberships, targets, features, uniforms [P, 4]): the intra-option updates, the decision's
@@ -180,16 +180,17 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  * a step taken inside an option moves w[a] . phi(s) toward r + gamma max_d Q(s', d) over the
  * decisions available at s' (as smdp_row with k = 1); the row then holds phi(s').
  * interrupt: an executing option stops at s' where it is no longer the greedy decision
- * (HierarchicalAgent's interruption). learn [P, K]: the option slots a transition from s may
- * update (objectives.q_learning.option_update_mask: the executing option wherever s is, the
- * others where s lies in their own initiation sets); only live slots are updated. */
+ * (HierarchicalAgent's interruption). own [P, K]: s in each option's own set (before the
+ * no-overlap narrowing). The live options a transition from s updates are
+ * objectives.q_learning.option_update_mask's: the executing one wherever s is, the others
+ * where own holds. */
 NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, A, F, Fo, step_stride;
     unsigned long long w_p, wo_p, obs_p, code_p, con_p, phi_p, dec_p, opt_p, act_p, ret_p,
         dur_p, nobs_p, rew_p, term_p, trunc_p, st_p, conn_p, reach_p, phin_p, coden_p,
         cols_p, status_p, u_p, step_p, o_obs, o_code, o_con, o_phi, o_dec, o_opt, o_act, o_ret,
-        o_dur, q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p, value_p, sphi_p, learn_p;
+        o_dur, q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p, value_p, sphi_p, own_p;
     double epsilon, option_epsilon, gamma, alpha_o, completion;
     int use_gamma, fail_boot, interrupt;
     long long max_option_steps, executable_from;
@@ -203,7 +204,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
                           &executable_from, &o_obs, &o_code, &o_con, &o_phi, &o_dec, &o_opt,
                           &o_act, &o_ret, &o_dur, &q_p, &dn_p, &de_p, &od_p, &sd_p, &id_p,
                           &ir_p, &started_p, &value_p, &fail_boot, &sphi_p, &interrupt,
-                          &learn_p))
+                          &own_p))
         return NULL;
     Py_ssize_t D = A + K;
     if (D > MAX_CHOICES) {
@@ -220,7 +221,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
     const int64_t *duration = I64(dur_p), *status = I64(status_p);
     const uint8_t *contains = U8(con_p), *terminated = U8(term_p), *truncated = U8(trunc_p);
     const uint8_t *stepped = U8(st_p), *contains_next = U8(conn_p), *reached = U8(reach_p);
-    const uint8_t *learn = U8(learn_p);
+    const uint8_t *own = U8(own_p);
     double *out_obs = F64(o_obs), *out_code = F64(o_code), *out_phi = F64(o_phi);
     double *out_ret = F64(o_ret), *q = F64(q_p), *option_delta = F64(od_p);
     double *smdp_delta = F64(sd_p), *info_return = F64(ir_p);
@@ -244,15 +245,15 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         const uint8_t *reach = reached + p * K, *in_next = contains_next + p * K;
         double r = go ? reward[p] : 0.0;
 
-        /* Intra-option Q-learning: every live option in `learn` (the executing one, and those
-         * whose own sets hold s). The executing option's values at s' are kept for its next
+        /* Intra-option Q-learning (option_update_mask): every live option that is executing
+         * or whose own set holds s. The executing option's values at s' are kept for its next
          * action (act_row). */
         double q_exec[MAX_CHOICES], q_other[MAX_CHOICES];
         int exec_valued = 0;
         for (Py_ssize_t k = 0; k < K; k++) {
             Py_ssize_t s = p * K + k;
             int valued = 0;
-            option_delta[s] = go && learn[s] && st[k] != 0
+            option_delta[s] = go && (own[s] || k == option[p]) && st[k] != 0
                 ? intra_row(w_opt + s * A * Fo, x, x1, action[p], r, reach[k], term, A, Fo,
                             alpha_o, gamma, completion, k == option[p] ? q_exec : q_other,
                             &valued)

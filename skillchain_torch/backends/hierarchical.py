@@ -165,10 +165,6 @@ class AtNext(NamedTuple):
     phi: Tensor  #: ``[P, F]``: the top level's features of ``s'``
     code: Tensor | None  #: ``[P, Fo]``: the option heads' code of ``s'``, or ``None``:
     code_columns: Tensor | None  #: ... picked from ``phi`` at these ``[Fo]`` int64 columns
-    #: ``[P, K]`` bool: the option slots this transition updates
-    #: (:func:`~skillchain_torch.objectives.option_update_mask`: the executing one, and those
-    #: whose own sets hold ``s``)
-    learn: Tensor
 
 
 class StepOutputs(NamedTuple):
@@ -198,7 +194,7 @@ def transition(state: StepState, learned: Learned, at_next: AtNext, rules: StepR
     _, K, A, Fo = learned.options.shape
     f64 = torch.float64
     reward, reached = at_next.reward.contiguous(), at_next.reached.contiguous()
-    learn = at_next.learn.contiguous()
+    own = state.own_contains.contiguous()  # the kernel applies option_update_mask's rule
     # The [P] outputs are rows of three fresh blocks (one allocation per dtype, not one per
     # output: this runs every step).
     decision, option, action, duration, d_next, info_duration = torch.empty(
@@ -237,6 +233,6 @@ def transition(state: StepState, learned: Learned, at_next: AtNext, rules: StepR
             started.data_ptr(), 0 if value is None else value.data_ptr(),
             int(rules.failure_bootstrap_primitives),
             0 if state_phi is None else state_phi.data_ptr(), int(rules.interruption),
-            learn.data_ptr())  # fmt: skip
+            own.data_ptr())  # fmt: skip
     return new, StepOutputs(q, decision_ended, info_duration, info_return, option_delta,
                             smdp_delta, started, value)
