@@ -6,20 +6,11 @@ from __future__ import annotations
 
 import pytest
 import torch
+from hand_built import F64, make_agent, make_bank, prefer_option
 
-from skillchain_torch.agents import HierarchicalAgent
 from skillchain_torch.backends import hierarchical as native_hierarchical
 from skillchain_torch.objectives import option_update_mask
-from skillchain_torch.options import (
-    FourierOptionQHead,
-    InitiationClassifier,
-    OptionBank,
-    OptionStatus,
-    RegionEvent,
-)
 
-F64 = torch.float64
-REGION = RegionEvent(center=(0.9, 0.2), radius=0.05, name="target region")
 PATHS = [False] + ([True] if native_hierarchical.AVAILABLE else [])
 
 
@@ -27,28 +18,17 @@ def obs(x: float) -> torch.Tensor:
     return torch.tensor([[x, 0.5, 0.5, 0.5]], dtype=F64)
 
 
-def bank_of(signs: tuple[float, ...]) -> OptionBank:
-    """Slot k's own set: ``x > 0.5`` (sign +1) or ``x < 0.5`` (-1); all target event 0."""
-    K = len(signs)
-    bank = OptionBank(1, K, FourierOptionQHead(1, K, order=1),
-                      InitiationClassifier(1, K, seed=0))  # fmt: skip
-    for k, sign in enumerate(signs):
-        _ = bank.allocate(torch.tensor([True]), target_event=0)  # siblings: the same event
-        with torch.no_grad():
-            bank.classifier.weight[:, k] = 0.0
-            bank.classifier.weight[:, k, 1] = sign  # feature 1 is x
-            bank.classifier.bias[:, k] = -0.5 * sign
-            bank.classifier.trained[:, k] = True
-    bank.status[:] = int(OptionStatus.LEARNED)
-    return bank
+def bank_of(signs: tuple[float, ...]):
+    """Slot k's own set: ``x > 0.5`` (sign +1) or ``x < 0.5`` (-1); all target event 0, so
+    the slots are siblings (the lower one the elder)."""
+    return make_bank(slots=len(signs), signs=signs)
 
 
-def agent_of(bank: OptionBank, native: bool, **kwargs) -> HierarchicalAgent:
-    return HierarchicalAgent(bank, order=1, alpha=0.01, epsilon=0.0, option_epsilon=0.0,
-                             events=(REGION,), native=native, **kwargs)  # fmt: skip
+def agent_of(bank, native: bool, **kwargs):
+    return make_agent(bank, native=native, **kwargs)
 
 
-def moved(agent: HierarchicalAgent, before: torch.Tensor) -> list[bool]:
+def moved(agent, before: torch.Tensor) -> list[bool]:
     """Which slots' weights changed since ``before``."""
     return (agent.bank.q_head.weight != before).flatten(2).any(-1)[0].tolist()
 
@@ -67,7 +47,7 @@ def test_mask_rule():
 @pytest.mark.parametrize("native", PATHS)
 def test_executing_option_learns_outside_its_set(native):
     agent = agent_of(bank_of((1.0,)), native)
-    agent.q_head.weight[:, 5, 0] = 100.0  # the top level prefers the option everywhere
+    prefer_option(agent, 0)  # the top level prefers the option everywhere
     agent.begin(obs(0.7))
     assert agent.options.tolist() == [0]
     agent.observe(obs(0.3), torch.tensor([-1.0], dtype=F64))  # leaves its set, goes on
@@ -80,7 +60,7 @@ def test_executing_option_learns_outside_its_set(native):
 @pytest.mark.parametrize("native", PATHS)
 def test_other_options_learn_only_in_their_own_sets(native):
     agent = agent_of(bank_of((1.0, -1.0)), native)
-    agent.q_head.weight[:, 5, 0] = 100.0  # slot 0 executes from x = 0.7
+    prefer_option(agent, 0)  # slot 0 executes from x = 0.7
     agent.begin(obs(0.7))
     assert agent.options.tolist() == [0]
     before = agent.bank.q_head.weight.clone()
@@ -93,7 +73,7 @@ def test_overlap_narrows_choosing_not_learning(native):
     # Two siblings over x > 0.5: the younger (slot 1) may not be chosen where the elder holds
     # s, but it learns there off-policy.
     agent = agent_of(bank_of((1.0, 1.0)), native, overlap=True)
-    agent.q_head.weight[:, 6, 0] = 100.0  # the top level would take slot 1 if available
+    prefer_option(agent, 1)  # the top level would take slot 1 if available
     agent.begin(obs(0.7))
     assert agent.contains[0].tolist() == [True, False]
     assert agent.own_contains[0].tolist() == [True, True]
@@ -109,7 +89,7 @@ def test_paths_agree_with_learning_options():
     weights = []
     for native in (False, True):
         agent = agent_of(bank_of((1.0, 1.0)), native, overlap=True)
-        agent.q_head.weight[:, 5, 0] = 100.0
+        prefer_option(agent, 0)
         agent.begin(obs(0.7))
         for x in (0.6, 0.45, 0.3, 0.55, 0.75):
             agent.observe(obs(x), torch.tensor([-1.0], dtype=F64))
