@@ -1,18 +1,23 @@
 #!/usr/bin/env bash
-# Issue 30's option-learning runs on the simple instance, 250 episodes, two workers, checkpoints
+# Issue 30's option-learning runs on the simple or hard instance, 250 episodes, two workers, checkpoints
 # every 25 episodes; a variant whose folder exists but has no returns.npy is resumed.
 #   bash results/option-learning/run.sh screen NAME [train flags...]   # seeds 0-19, 20 runs
 #   bash results/option-learning/run.sh confirm NAME [train flags...]  # seeds 1000-1099, 100 runs
+#   screen-hard / confirm-hard: the same blocks on pinball_hard_two_starts
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 block=$1 name=$2; shift 2
+map=pinball_simple_single
 case $block in
   screen) runs=20 seed=0 ;;  # screening only, never the reported evidence
   confirm) runs=100 seed=1000 ;;  # the block results/paper/simple ran on
-  *) echo "run.sh: block must be screen or confirm, got '$block'" >&2; exit 2 ;;
+  screen-hard) runs=20 seed=0 map=pinball_hard_two_starts ;;
+  confirm-hard) runs=100 seed=1000 map=pinball_hard_two_starts ;;  # results/paper/hard: 1000-1059
+  *) echo "run.sh: block must be screen, confirm, screen-hard or confirm-hard, got '$block'" >&2
+     exit 2 ;;
 esac
 out=results/option-learning/$block/$name
 if [ -f "$out/returns.npy" ]; then echo "$name: done"; exit 0; fi
 if [ -d "$out" ]; then exec .venv/bin/skillchain train --resume "$out" --workers 2 --quiet; fi
-exec .venv/bin/skillchain train --map pinball_simple_single --runs "$runs" --episodes 250 \
+exec .venv/bin/skillchain train --map "$map" --runs "$runs" --episodes 250 \
   --seed "$seed" --workers 2 --checkpoint-every 25 --quiet --out "$out" "$@"
