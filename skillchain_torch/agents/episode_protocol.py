@@ -132,6 +132,8 @@ class EpisodeProtocol:
             "episode": {name: getattr(self, name).clone() for name in self._EPISODE},
             "native": self.native,
             **({} if self.optimizer is None else {"optimizer": self.optimizer.state_dict()}),
+            **({"top_learner": self.top_learner.state_dict()}
+               if hasattr(getattr(self, "top_learner", None), "state_dict") else {}),
         }
 
     def load_state_dict(self, state, strict: bool = True, assign: bool = False):
@@ -140,6 +142,8 @@ class EpisodeProtocol:
         self.q_head.load_state_dict(state["q_head"])
         if self.optimizer is not None and "optimizer" in state:
             self.optimizer.load_state_dict(state["optimizer"])
+        if "top_learner" in state:
+            self.top_learner.load_state_dict(state["top_learner"])
         self.bank.load_state_dict(state["bank"])
         self.rng.load_state_dict(state["rng"])
         self.rng.to(device)

@@ -16,20 +16,17 @@ The agent of paper sections 2, 4 and 5.1 with a given set of options (no discove
   intra-option Q-learning (:class:`~skillchain_torch.objectives.IntraOptionQLearning`) from
   *every* primitive transition whose start state lies in its initiation set, whoever acted.
 
-Random numbers: each active agent draws 4 uniforms from its own
-:class:`~skillchain_torch.rng.CounterRNG` stream per step (2 for the top-level choice, 2 for the
-option's action choice), and 4 more when it restarts an episode, whatever it decides, so its
-stream never depends on the other agents. Every tensor operation is row-independent (the
-library pieces are), so agent ``p`` of a population is bit-identical to the same agent alone.
+Random numbers: each active agent draws 4 uniforms per step from its own
+:class:`~skillchain_torch.rng.CounterRNG` stream (2 for the top level, 2 for the option's
+action), and 4 more at a restart, whatever it decides; every operation is row-independent, so
+agent ``p`` of a population is bit-identical to the same agent alone.
 
-The per-step state (:class:`~.step_state.StepState`: ``s``, the decision in force, the action)
-is held for all P agents; rows that finished training (``compact``) simply stop being updated.
+The per-step state (:class:`~.step_state.StepState`) is held for all P agents.
 
 Two paths compute a step (``native``): the torch path below, and a compiled one
-(:mod:`.compiled_step` hands the StepState to :mod:`skillchain_torch.backends.hierarchical`,
-the default where every piece it replaces is the built-in one) that gives the same decisions
-with sums in an order of its own. The top level's rules are in :mod:`.top_level`, the
-trainer's protocol in :mod:`.episode_protocol`.
+(:mod:`.compiled_step`, the default where every piece is the built-in one): the same decisions,
+sums in an order of its own. The top level's rules: :mod:`.top_level`; the trainer's protocol:
+:mod:`.episode_protocol`.
 
 Example:
     >>> from skillchain_torch.options import OptionBank
@@ -130,14 +127,14 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
             ``obs [P, 4] -> [P, F]``, e.g. ``nn.Identity()`` for a head on the raw observation.
         optimizer: for a head of the user's own: a ``torch.optim.Optimizer`` over its
             parameters (default SGD at ``alpha``).
+        top_learner: for a head of the user's own, instead of one loss step per decision: a
+            callable ``td [P] -> td_error [P]`` (e.g. :class:`~skillchain_torch.objectives.
+            ReplayTD`), which also reads ``next_phi``, ``next_decision``, ``next_available``.
         device: torch device (default: the bank's).
         native: run the per-step arithmetic in C (:mod:`~skillchain_torch.backends.
-            hierarchical`, and the classifier's memberships and fits,
-            :mod:`~skillchain_torch.backends.initiation`). Default: when built, on the CPU in
-            float64 with Fourier option heads and a float ``completion_reward``. The same
-            decisions from the same uniforms, but sums in an order of their own: the numbers
-            agree with ``native=False`` to rounding, not bit for bit (each is reproducible on
-            its own, and P-invariant).
+            hierarchical`, :mod:`~skillchain_torch.backends.initiation`). Default: when built,
+            on the CPU in float64 with the built-in pieces. Sums in an order of their own:
+            equal to ``native=False`` to rounding (each reproducible and P-invariant).
     """
 
     def __init__(
@@ -160,6 +157,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         q_head: nn.Module | None = None,
         features: nn.Module | None = None,
         optimizer: torch.optim.Optimizer | None = None,
+        top_learner=None,
         device: torch.device | str | None = None,
         native: bool | None = None,
     ):
@@ -210,7 +208,9 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         self.loss = None if self.closed_form else SMDPSarsaLoss(self.q_head, gamma)
         if not self.closed_form and optimizer is None:
             optimizer = torch.optim.SGD(self.q_head.parameters(), lr=alpha)
-        self.optimizer = optimizer
+        self.optimizer, self.top_learner = optimizer, top_learner
+        if top_learner is not None and self.closed_form:
+            raise ValueError("top_learner needs a head with parameters, not LinearQHead")
         self.option_update = IntraOptionQLearning(gamma, completion_reward)
         if isinstance(seed, Tensor):
             self.rng = CounterRNG(seed.to(device), stream=AGENT_STREAM)
@@ -372,7 +372,9 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
                        best, terminated, inside)
             self.state_phi = torch.where(stepped[:, None], phi_next, self.state_phi)
         smdp_delta = self.learn(self.decision_phi, self.decision, self.decision_return,
-                                self.duration.clamp(min=1), q_next, terminated, decision_ended)
+                                self.duration.clamp(min=1), q_next, terminated, decision_ended,
+                                next_phi=phi_next, next_decision=d_next,
+                                next_available=self.last_available)  # (for a top_learner)
         # The state tensors are replaced, never written in place, so no copies are needed.
         info = {"decision_ended": decision_ended, "duration": self.duration,
                 "decision_return": self.decision_return, "option_delta": option_delta,

@@ -108,20 +108,28 @@ class TopLevel:
                                    check=False)  # primitives are always available
 
     def learn(self, phi: Tensor, decision: Tensor, ret: Tensor, duration: Tensor,
-              next_value: Tensor, terminated: Tensor, active: Tensor) -> Tensor:  # fmt: skip
+              next_value: Tensor, terminated: Tensor, active: Tensor,
+              **next_state: Tensor) -> Tensor:  # fmt: skip
         """One SMDP Sarsa step of the top-level head toward ``ret + gamma^k next_value``
         for the ``active`` agents; their TD errors ``[P]``. The built-in linear head steps in
-        closed form (:class:`SarsaUpdate`); any other by its loss and optimizer."""
+        closed form (:class:`SarsaUpdate`); any other by its loss and optimizer, or by the
+        agent's ``top_learner`` (which also reads ``next_state``: ``next_phi``,
+        ``next_decision``, ``next_available``)."""
         if self.closed_form:
             return self.update(self.q_head, phi, decision, ret, duration, phi, decision,
                                terminated, active=active, next_value=next_value)
         with torch.enable_grad():
-            return self._loss_step(phi, decision, ret, duration, next_value, terminated, active)
+            return self._loss_step(phi, decision, ret, duration, next_value, terminated, active,
+                                   next_state)  # fmt: skip
 
-    def _loss_step(self, phi, decision, ret, duration, next_value, terminated, active) -> Tensor:
+    def _loss_step(self, phi, decision, ret, duration, next_value, terminated, active,
+                   next_state=None) -> Tensor:  # fmt: skip
+        extra = next_state if self.top_learner is not None and next_state else {}
         td = TensorDict(phi=phi, decision=decision, decision_return=ret, duration=duration,
-                        next_value=next_value, terminated=terminated, active=active,
+                        next_value=next_value, terminated=terminated, active=active, **extra,
                         batch_size=[self.population])  # fmt: skip
+        if self.top_learner is not None:
+            return self.top_learner(td)
         self.optimizer.zero_grad()
         out = self.loss(td)
         out["loss"].backward()

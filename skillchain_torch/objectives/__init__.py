@@ -1,6 +1,7 @@
 """Update rules ("objectives" in TorchRL terms): closed-form TD steps for the linear heads
 (:class:`SarsaUpdate`, :class:`IntraOptionQLearning`) and the same rules as TorchRL loss modules
-(:class:`SMDPSarsaLoss`, :class:`IntraOptionQLoss`) for heads trained by an optimizer."""
+(:class:`SMDPSarsaLoss`, :class:`IntraOptionQLoss`) for heads trained by an optimizer, and
+:class:`ReplayTD`, replay and a target network for neural heads."""
 
 from skillchain_torch.objectives.intra_option_loss import IntraOptionQLoss
 from skillchain_torch.objectives.q_learning import (
@@ -8,12 +9,14 @@ from skillchain_torch.objectives.q_learning import (
     option_td_target,
     option_update_mask,
 )
+from skillchain_torch.objectives.replay import ReplayTD
 from skillchain_torch.objectives.sarsa import SarsaUpdate, discount, smdp_td_error
 from skillchain_torch.objectives.smdp_sarsa_loss import SMDPSarsaLoss
 
 __all__ = [
     "IntraOptionQLearning",
     "IntraOptionQLoss",
+    "ReplayTD",
     "SMDPSarsaLoss",
     "SarsaUpdate",
     "discount",

@@ -7,7 +7,7 @@ The pieces (paper sections 2, 4 and 5.1), each batched over ``[P, K]`` (agents x
   ``torch.func``-stacked neural drop-in), both :class:`OptionQHead`.
 - :class:`InitiationClassifier`: logistic regression over polynomial features per slot; its
   fitting maths in :func:`logistic_sweeps`, where examples go in its stores in
-  :func:`store_places`.
+  :func:`store_places`. :class:`MLPInitiationClassifier`: the same sets with an MLP per slot.
 - Termination predicates: :class:`GoalEvent`, :class:`RegionEvent`, :class:`InitiationSetEvent`,
   :class:`LambdaEvent`.
 - :class:`OptionBank`: bundles the above with per-slot metadata; save / load / select agents.
@@ -23,6 +23,7 @@ from skillchain_torch.options.examples import reservoir_uniform, store_places
 from skillchain_torch.options.initiation import InitiationClassifier
 from skillchain_torch.options.io import register_classifier, register_q_head
 from skillchain_torch.options.logistic import logistic_sweeps
+from skillchain_torch.options.mlp_initiation import MLPInitiationClassifier
 from skillchain_torch.options.mlp_q_head import MLPOptionQHead
 from skillchain_torch.options.q_head import FourierOptionQHead, OptionQHead
 from skillchain_torch.options.status import OptionStatus, slot_mask
@@ -41,6 +42,7 @@ __all__ = [
     "InitiationClassifier",
     "InitiationSetEvent",
     "LambdaEvent",
+    "MLPInitiationClassifier",
     "MLPOptionQHead",
     "OptionBank",
     "OptionQHead",

@@ -33,6 +33,7 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.options.initiation import InitiationClassifier
+from skillchain_torch.options.mlp_initiation import MLPInitiationClassifier
 from skillchain_torch.options.mlp_q_head import MLPOptionQHead
 from skillchain_torch.options.q_head import FourierOptionQHead, OptionQHead
 
@@ -45,7 +46,8 @@ Q_HEADS: dict[str, type[OptionQHead]] = {
     "FourierOptionQHead": FourierOptionQHead,
     "MLPOptionQHead": MLPOptionQHead,
 }
-CLASSIFIERS: dict[str, type] = {"InitiationClassifier": InitiationClassifier}
+CLASSIFIERS: dict[str, type] = {"InitiationClassifier": InitiationClassifier,
+                                 "MLPInitiationClassifier": MLPInitiationClassifier}
 
 
 def register_q_head(cls: type[OptionQHead]) -> type[OptionQHead]:

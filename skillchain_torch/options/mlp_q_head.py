@@ -40,9 +40,16 @@ class MLPOptionQHead(OptionQHead):
     Args:
         population, slots, num_actions: as :class:`FourierOptionQHead`.
         hidden: width of the hidden layers; layers: how many (tanh activations).
-        lr: SGD step size on the squared TD error ``0.5 * (target - Q_k(s, a))^2``.
-        q_scale: the network outputs ``Q / q_scale``; with Pinball's returns (thousands) a scale
-            of the order of the returns (e.g. 1000) keeps gradients tame.
+        lr: SGD step size on the loss of the scaled TD error ``delta / q_scale``.
+        q_scale: the network outputs ``Q / q_scale`` and learns from ``delta / q_scale``. With
+            Pinball's returns (of order 10^4: an option's target earns ``r + C``) a scale of
+            1000 (the default) keeps the network's outputs and errors of order 10.
+        loss_function: ``"smooth_l1"`` (Huber at 1 on the scaled error, the default: a
+            gradient never larger than ``lr`` times the network's) or ``"l2"``
+            (``0.5 (delta / q_scale)^2``).
+
+    Before this scaling the loss was ``0.5 delta^2`` on unscaled errors, so at ``q_scale=1000``
+    a TD error of 10^4 made a step 10^7 times ``lr`` (NaN after 78 updates).
         seed: int (agent p uses ``seed + p``) or ``LongTensor [P]``; initial weights of a slot
             come from a :class:`~skillchain_torch.rng.CounterRNG` stream of its agent.
 
@@ -65,13 +72,17 @@ class MLPOptionQHead(OptionQHead):
         layers: int = 2,
         num_actions: int = NUM_ACTIONS,
         lr: float = 1e-3,
-        q_scale: float = 1.0,
+        q_scale: float = 1000.0,
         seed: int | Tensor = 0,
         dtype: torch.dtype | str = torch.float64,
         device: torch.device | str | None = None,
         obs_dim: int = OBS_DIM,
+        loss_function: str = "smooth_l1",
     ):
         super().__init__()
+        if loss_function not in ("smooth_l1", "l2"):
+            raise ValueError(f"loss_function must be 'smooth_l1' or 'l2', got {loss_function!r}")
+        self.loss_function = loss_function
         dtype = _DTYPES[dtype] if isinstance(dtype, str) else dtype
         if population < 1 or slots < 1 or num_actions < 1 or hidden < 1 or layers < 1:
             raise ValueError("population, slots, num_actions, hidden, layers must be >= 1")
@@ -82,6 +93,7 @@ class MLPOptionQHead(OptionQHead):
         self.config = dict(
             population=population, slots=slots, hidden=hidden, layers=layers,
             num_actions=num_actions, lr=self.lr, q_scale=self.q_scale, dtype=dtype_name(dtype),
+            loss_function=loss_function,
         )  # fmt: skip
         if self.obs_dim != OBS_DIM:
             self.config["obs_dim"] = self.obs_dim
@@ -132,10 +144,18 @@ class MLPOptionQHead(OptionQHead):
         weight = mask.reshape(-1).to(dtype)
         goal = torch.where(mask, target.to(dtype), torch.zeros((), dtype=dtype)).reshape(-1)
 
+        huber = self.loss_function == "smooth_l1"
+
         def slot_loss(params, x, a, y, m):
             q_sa = torch.gather(self._net(params, x), 0, a[None])[0]
             delta = y - q_sa
-            return 0.5 * m * delta * delta, delta
+            e = delta / self.q_scale
+            if huber:  # 0.5 e^2 inside [-1, 1], |e| - 0.5 outside
+                size = e.abs()
+                loss = torch.where(size <= 1.0, 0.5 * e * e, size - 0.5)
+            else:
+                loss = 0.5 * e * e
+            return m * loss, delta
 
         with torch.no_grad():
             grads, delta = vmap(grad(slot_loss, has_aux=True))(
