@@ -52,39 +52,10 @@ from .config_checks import (
     short,
     type_problem,
 )
+from .config_fields import LABEL_FIELDS, LEGACY_FIELDS, RESUME_FIELDS, UNREAD_FIELDS
 
 __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "RESUME_FIELDS",
            "LEGACY_FIELDS", "UNREAD_FIELDS", "LABEL_FIELDS", "PRESET_CONFIG_FIELDS", "INT64_MAX"]
-
-# Fields added after runs were published, with the behaviour every run before them had: a
-# saved config without one of them ran with this value (whatever today's default is).
-LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_negatives": False,
-                 "policy_start": "zero", "value_start": "max-sample", "value_bonus": 0.0,
-                 "option_alpha": 0.0005,
-                 "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15,
-                 "intra_option_primitives": False, "option_interruption": False}
-
-# Fields that may differ between a checkpoint and the trainer that loads it: they change how
-# the run is written down or where it computes, not the numbers it produces.
-RESUME_FIELDS = ("checkpoint_every", "device")
-# Where the values came from: a label only (the values themselves are fields), so two configs
-# with the same values are the same run whichever preset they started from.
-LABEL_FIELDS = ("preset",)
-
-# Fields an agent kind never reads: a saved run of that kind does not differ from a config that
-# changes them (so a flat run stays valid when a skill-chaining default changes).
-_DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestation_positives",
-                     "initiation_start", "initiation_constrain", "one_class_fits",
-                     "keep_negatives", "policy_start", "value_start", "value_bonus",
-                     "option_alpha", "gestation", "convergence_threshold")
-UNREAD_FIELDS = {
-    "flat": _DISCOVERY_FIELDS + ("options", "options_agent", "failure_bootstrap",
-                                 "completion_reward", "intra_option_primitives",
-                                 "option_interruption"),
-    "given-options": _DISCOVERY_FIELDS,
-    "skill-chaining": ("options", "options_agent"),
-}
-
 
 def paper_defaults(map_name: str) -> tuple[int, float]:
     """``(order, alpha)`` of the paper for a map: (5, 0.0005) on hard maps, else (4, 0.001)."""
@@ -165,6 +136,9 @@ class TrainConfig:
             finite bounds (``None``: the spec's).
         obs_dim, num_actions: the env's observation size and action count, read from its
             specs when the trainer starts (``None``: Pinball's 4 and 5).
+        top_head, option_head, initiation: the skill-chaining agent's pieces by name
+            (:mod:`skillchain_torch.agents.pieces`): the paper's ``"fourier"``, ``"fourier"``,
+            ``"logistic"``, or ``"mlp"`` for each (neural).
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -209,6 +183,9 @@ class TrainConfig:
     obs_bounds: str | None = None
     obs_dim: int | None = None
     num_actions: int | None = None
+    top_head: str = "fourier"
+    option_head: str = "fourier"
+    initiation: str = "logistic"
 
     def __post_init__(self):
         # Fill what the config leaves open from its preset, so every reader sees values.
@@ -254,6 +231,7 @@ class TrainConfig:
         fit in the memory available now.
         """
         from skillchain_torch.agents.hierarchical import FAILURE_BOOTSTRAPS
+        from skillchain_torch.agents.pieces import INITIATIONS, OPTION_HEADS, TOP_HEADS
         from skillchain_torch.discovery.gestation import POLICY_STARTS, VALUE_STARTS
         from skillchain_torch.envs.pinball import MAP_NAMES
         from skillchain_torch.trainers.agents import AGENTS
@@ -297,7 +275,17 @@ class TrainConfig:
              f"one of {', '.join(VALUE_STARTS)}"),
             ("policy_start", repr(self.policy_start), self.policy_start in POLICY_STARTS,
              f"one of {', '.join(POLICY_STARTS)}"),
+            *((name, repr(getattr(self, name)), getattr(self, name) in known,
+               f"one of {', '.join(sorted(known))}") for name, known in (
+                ("top_head", TOP_HEADS), ("option_head", OPTION_HEADS),
+                ("initiation", INITIATIONS))),
         ]
+        if self.agent == "skill-chaining" and self.top_head != "fourier" and (
+                self.policy_start != "zero" or self.value_start == "agent"):  # fmt: skip
+            raise ConfigError(f"top_head {self.top_head!r} needs policy_start 'zero' and a "
+                              f"value_start other than 'agent' (they read the linear head), got "
+                              f"{self.policy_start!r} and {self.value_start!r}: add --preset "
+                              "paper", ("top_head", "policy_start", "value_start"))  # fmt: skip
         if self.options_agent is not None:
             checks.append(("options_agent", self.options_agent, self.options_agent >= 0, ">= 0"))
         if self.alpha is not None:

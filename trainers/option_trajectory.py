@@ -27,6 +27,7 @@ import torch
 from skillchain_torch.agents import HierarchicalAgent
 from skillchain_torch.envs.pinball import PinballEnv, load_map
 from skillchain_torch.envs.pinball.physics import GOAL_REWARD
+from skillchain_torch.modules import LinearQHead
 
 __all__ = ["greedy_trajectory", "greedy_trajectories", "best_greedy_trajectory", "solution_rank",
            "plot_option_trajectory", "save_option_trajectory", "OPTION_COLORS"]  # fmt: skip
@@ -51,13 +52,21 @@ def _frozen_agents(agent, rows, epsilon: float, seeds) -> HierarchicalAgent:
     rows = [int(p) for p in rows]
     # A plain HierarchicalAgent: the options as they are (no discovery, no refits), with the
     # no-overlap rule they were learned under.
+    head = agent.q_head
+    own = {}  # a head of the user's own: its rows, on the agent's features
+    if type(head) is not LinearQHead:
+        if not hasattr(head, "select_agents"):
+            raise TypeError(f"replaying needs the top-level head's rows: {type(head).__name__}"
+                            " has no select_agents(rows)")  # fmt: skip
+        own = {"q_head": head.select_agents(rows), "features": agent.features}
     frozen = HierarchicalAgent(agent.bank.select_agents(rows), order=agent.order, alpha=0.0,
                                gamma=agent.gamma, epsilon=epsilon, option_epsilon=epsilon,
                                seed=torch.tensor([int(s) for s in seeds], dtype=torch.int64),
                                events=agent.events, max_option_steps=agent.max_option_steps,
-                               overlap=True)
-    with torch.no_grad():
-        frozen.q_head.weight.copy_(agent.q_head.weight[rows])
+                               overlap=True, **own)  # fmt: skip
+    if not own:
+        with torch.no_grad():
+            frozen.q_head.weight.copy_(head.weight[rows])
     for name in ("alpha", "lr"):  # frozen: no intra-option learning on the way
         if hasattr(frozen.bank.q_head, name):
             setattr(frozen.bank.q_head, name, 0.0)

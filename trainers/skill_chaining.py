@@ -41,7 +41,7 @@ class SkillChainingRunAgent(SkillChainingAgent):
         values = {name: getattr(cfg, name) for name in PRESET_CONFIG_FIELDS}
         bank, arguments = SkillChainingAgent.build_arguments(
             cfg.runs, cfg.preset, seed=cfg.seed, device=device, map=cfg.map, native=native,
-            obs_dim=cfg.obs_dim, num_actions=cfg.num_actions,
-            **values)  # fmt: skip
+            obs_dim=cfg.obs_dim, num_actions=cfg.num_actions, top_head=cfg.top_head,
+            option_head=cfg.option_head, initiation=cfg.initiation, **values)  # fmt: skip
         super().__init__(bank, **arguments)
         self.config = cfg

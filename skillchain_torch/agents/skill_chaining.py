@@ -129,8 +129,10 @@ class SkillChainingAgent(HierarchicalAgent):
                 them to the instance (``None``: the first instance's, 4 and 0.001).
             **kwargs: any :class:`~skillchain_torch.presets.Preset` field (``slots``,
                 ``gestation``, ``option_alpha``, ``balanced``, ...) overrides the preset's
-                value; the rest go to the constructor (``events``, ``native``, ``reading``,
-                ``interruption``, ...) and win over the preset.
+                value; ``top_head``, ``option_head``, ``initiation`` name the pieces
+                (:mod:`~skillchain_torch.agents.pieces`: the paper's ``"fourier"``,
+                ``"fourier"``, ``"logistic"`` by default, or ``"mlp"``); the rest go to the
+                constructor (``events``, ``native``, ``reading``, ...) and win over the preset.
 
         Example:
             >>> paper = SkillChainingAgent.build(2, preset="paper", order=1, gestation=5)
@@ -149,7 +151,12 @@ class SkillChainingAgent(HierarchicalAgent):
                         map: str | None = None, **kwargs) -> tuple[OptionBank, dict]:  # fmt: skip
         """``(bank, constructor keyword arguments)`` of :meth:`build` (the trainer's
         ``SkillChainingRunAgent`` builds through this too, so both build the same agent)."""
+        from .pieces import assemble_bank, top_level_arguments  # (they import the modules)
+
         fields = {k: kwargs.pop(k) for k in list(kwargs) if k in PRESET_FIELDS}
+        names = {k: kwargs.pop(k, d) for k, d in (("top_head", "fourier"),
+                                                  ("option_head", "fourier"),
+                                                  ("initiation", "logistic"))}  # fmt: skip
         # The env's sizes (its specs; None: Pinball's 4 and 5).
         sizes = {k: v for k in ("obs_dim", "num_actions") if (v := kwargs.pop(k, None)) is not None}
         p = preset_named(preset).replace(**fields)
@@ -160,6 +167,9 @@ class SkillChainingAgent(HierarchicalAgent):
                                 balanced=p.balanced, keep_negatives=p.keep_negatives,
                                 initial_bias=p.initiation_bias,
                                 centered=p.initiation_centered, **sizes)  # fmt: skip
+        bank = assemble_bank(bank, names["option_head"], names["initiation"], seed=seed)
+        top = top_level_arguments(names["top_head"], population, bank.obs_dim,
+                                  bank.num_actions + p.slots, p.gamma, seed, device)  # fmt: skip
         reading = InitiationReading(p.gestation_positives, p.initiation_start,
                                     p.initiation_constrain, p.one_class_fits)  # fmt: skip
         arguments = dict(
@@ -174,7 +184,7 @@ class SkillChainingAgent(HierarchicalAgent):
             convergence_episodes=p.convergence_episodes, overlap=p.overlap, reading=reading,
             policy_start=p.policy_start, value_start=p.value_start, value_bonus=p.value_bonus,
         )  # fmt: skip
-        return bank, {**arguments, **kwargs}
+        return bank, {**arguments, **top, **kwargs}
 
     # ------------------------------------------------------------------ hooks
     def narrow(self, contains: Tensor) -> Tensor:

@@ -43,8 +43,9 @@ class MLPQHead(nn.Module):
             order of 10^4 (goal +10,000, completion reward +10,000); with ``value_scale=1000``
             the network works on values of order 10 and, with the loss's matching
             ``value_scale``, on TD errors of order 10, where Adam's default step is sane.
-        seed: agent p's initial weights come from ``torch.Generator`` seeded ``seed + p``, so
-            an agent starts the same whatever the population.
+        seed: int (agent p's initial weights come from a ``torch.Generator`` seeded
+            ``seed + p``) or ``LongTensor [P]`` of per-agent seeds; an agent starts the same
+            whatever the population.
         dtype, device: of the weights (float32 by default: a network gains nothing from
             float64 and its tanh costs several times more there). The values come back in the
             input's dtype, so the agent's arithmetic stays in float64.
@@ -60,7 +61,7 @@ class MLPQHead(nn.Module):
 
     def __init__(self, num_features: int, num_decisions: int, population: int,
                  hidden: int = 64, layers: int = 2, value_scale: float = 1000.0,
-                 seed: int = 0, dtype: torch.dtype = torch.float32,
+                 seed: int | Tensor = 0, dtype: torch.dtype = torch.float32,
                  device: torch.device | str | None = None):  # fmt: skip
         super().__init__()
         if min(num_features, num_decisions, population, hidden, layers) < 1:
@@ -70,8 +71,11 @@ class MLPQHead(nn.Module):
             raise ValueError(f"value_scale must be > 0, got {value_scale}")
         self.num_features, self.num_decisions = int(num_features), int(num_decisions)
         self.population, self.value_scale = int(population), float(value_scale)
-        self.config = dict(hidden=int(hidden), layers=int(layers), value_scale=self.value_scale,
-                           seed=int(seed))  # fmt: skip
+        seeds = (seed.reshape(-1).tolist() if isinstance(seed, Tensor)
+                 else [int(seed) + p for p in range(population)])  # fmt: skip
+        if len(seeds) != population:
+            raise ValueError(f"seed must be an int or [P={population}] seeds, got {len(seeds)}")
+        self.config = dict(hidden=int(hidden), layers=int(layers), value_scale=self.value_scale)
         sizes = [self.num_features] + [int(hidden)] * int(layers) + [self.num_decisions]
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
@@ -82,7 +86,7 @@ class MLPQHead(nn.Module):
                                                         device=device)))  # fmt: skip
         with torch.no_grad():
             for p in range(population):  # PyTorch's default range, +-1/sqrt(fan_in)
-                g = torch.Generator().manual_seed(int(seed) + p)
+                g = torch.Generator().manual_seed(int(seeds[p]))
                 for weight, bias in zip(self.weights[:-1], self.biases[:-1]):
                     bound = 1.0 / math.sqrt(weight.shape[1])
                     draws = torch.rand(weight.shape[1] * weight.shape[2] + bias.shape[1],
@@ -126,6 +130,19 @@ class MLPQHead(nn.Module):
         weight.copy_(torch.where(m[:, None, :], torch.zeros_like(weight), weight))
         target = (value.to(bias) / self.value_scale)
         bias.copy_(torch.where(m, target, bias))
+
+    def select_agents(self, index) -> MLPQHead:
+        """A new head holding agents ``index`` (repeats allowed), weights copied."""
+        index = torch.as_tensor(index, dtype=torch.int64).reshape(-1)
+        weight = self.weights[0]
+        new = MLPQHead(self.num_features, self.num_decisions, len(index),
+                       hidden=self.config["hidden"], layers=self.config["layers"],
+                       value_scale=self.value_scale, dtype=weight.dtype,
+                       device=weight.device)  # fmt: skip
+        with torch.no_grad():
+            for mine, theirs in zip([*self.weights, *self.biases], [*new.weights, *new.biases]):
+                theirs.copy_(mine[index.to(mine.device)])
+        return new
 
     def extra_repr(self) -> str:
         return (f"num_features={self.num_features}, num_decisions={self.num_decisions}, "

@@ -145,3 +145,39 @@ def test_a_neural_skill_chaining_agent_trains_chains_and_resumes(tmp_path):
     resumed.load_state_dict(state)
     resumed.train()
     assert resumed.returns.tolist() == whole.returns.tolist()
+
+
+def test_the_config_names_the_pieces_and_refuses_unknown_ones():
+    cfg = TrainConfig(agent="skill-chaining", preset="paper", map="pinball_box", runs=2,
+                      episodes=1, max_episode_steps=30, top_head="mlp", option_head="mlp",
+                      initiation="mlp")  # fmt: skip
+    trainer = PopulationTrainer(cfg)
+    agent = trainer.agent
+    assert (type(agent.q_head), type(agent.bank.q_head), type(agent.bank.classifier)) == (
+        MLPQHead, MLPOptionQHead, MLPInitiationClassifier)
+    trainer.train()
+    with pytest.raises(ValueError, match=r"^top_head must be one of fourier, mlp, got 'rnn'$"):
+        TrainConfig(agent="skill-chaining", preset="paper", top_head="rnn").validate()
+    with pytest.raises(ValueError, match="needs policy_start 'zero'.*--preset paper$"):
+        TrainConfig(agent="skill-chaining", top_head="mlp").validate()
+
+
+def test_register_piece_adds_a_name_the_config_accepts():
+    from skillchain_torch.agents import pieces
+
+    class Wider(MLPInitiationClassifier):
+        pass
+
+    pieces.register_piece("initiation", "wider",
+                          lambda clf: Wider(population=clf.population, slots=clf.slots,
+                                            capacity=16, hidden=4))  # fmt: skip
+    try:
+        agent = SkillChainingAgent.build(2, preset="paper", initiation="wider", order=1)
+        assert type(agent.bank.classifier) is Wider
+        TrainConfig(agent="skill-chaining", initiation="wider").validate(memory=False)
+        with pytest.raises(ValueError, match="^initiation must be one of logistic, mlp, wider"):
+            TrainConfig(agent="skill-chaining", initiation="nope").validate(memory=False)
+    finally:
+        del pieces.INITIATIONS["wider"]
+    with pytest.raises(ValueError, match="--initiation must be one of logistic, mlp"):
+        SkillChainingAgent.build(2, initiation="wider", order=1)
