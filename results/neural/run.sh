@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Issue 31's pilots: flat against skill chaining, linear and neural, on Gymnasium envs and Pinball.
+#   bash results/neural/run.sh ENV NAME EPISODES [train flags...]
+# ENV: a Gymnasium id (MountainCar-v0, Acrobot-v1) or a Pinball map (pinball_*); 10 runs,
+# seeds 0-9 (pilots: no tuning was done on these seeds), one process (P = 10 agents batched).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+env=$1 name=$2 episodes=$3; shift 3
+case $env in
+  pinball_*) where=(--map "$env") ;;
+  *) where=(--env "gymnasium:$env") ;;
+esac
+out=results/neural/$env/$name
+if [ -f "$out/returns.npy" ]; then echo "$env/$name: done"; exit 0; fi
+if [ -d "$out" ]; then exec .venv/bin/skillchain train --resume "$out" --quiet; fi
+exec .venv/bin/skillchain train "${where[@]}" --runs 10 --episodes "$episodes" --seed 0 \
+  --checkpoint-every 10 --quiet --out "$out" "$@"
