@@ -30,7 +30,7 @@ CONFIG_OPTIONS = (
     "initiation_start", "initiation_constrain", "one_class_fits", "failure_bootstrap",
     "keep_negatives", "intra_option_primitives", "option_interruption", "policy_start",
     "value_start", "value_bonus", "option_alpha", "completion_reward", "gestation",
-    "convergence_threshold", "top_head", "option_head", "initiation",
+    "convergence_threshold", "top_head", "option_head", "initiation", "max_branching",
 )  # fmt: skip
 
 
@@ -69,6 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
         train.add_argument(flag, default=None, metavar="NAME",
                            help=f"skill chaining's piece: {paper} (the paper's, default) or mlp "
                            "(neural; skillchain_torch.agents.pieces)")  # fmt: skip
+    train.add_argument("--max-branching", type=int, default=None, help="options per target "
+                       "event (paper and default: 3; 0: none, a flat baseline for any head)")
     train.add_argument("--runs", type=int, default=None, help="P, independent agents (default 1)")
     train.add_argument(
         "--episodes", type=int, default=None, help="E, episodes per agent (default 100)"

@@ -129,6 +129,8 @@ class TrainConfig:
         convergence_threshold: (preset) an initiation set is learned (and becomes a target
             event) when its classifier's weights moved on average less than this per episode,
             twice in a row (paper: 0.15).
+        max_branching: (preset) options per target event (paper: 3; 0 creates none: the
+            same agent and learners without options, a flat baseline for any head).
         env: ``None`` for Pinball (``map``), else ``"gymnasium:ID"`` or
             ``"gymnasium:MODULE:ID"``: a Gymnasium env through TorchRL's ``GymEnv`` (see
             :mod:`skillchain_torch.envs.external`).
@@ -178,6 +180,7 @@ class TrainConfig:
     value_bonus: float | None = None
     gestation: int | None = None
     convergence_threshold: float | None = None
+    max_branching: int | None = None
 
     env: str | None = None
     obs_bounds: str | None = None
@@ -264,6 +267,7 @@ class TrainConfig:
              f"one of {', '.join(FAILURE_BOOTSTRAPS)}"),
             ("value_bonus", self.value_bonus, math.isfinite(self.value_bonus), "finite"),
             ("gestation", self.gestation, 0 <= self.gestation <= 1_000_000, "in [0, 10^6]"),
+            ("max_branching", self.max_branching, self.max_branching >= 0, ">= 0"),
             ("convergence_threshold", self.convergence_threshold,
              math.isfinite(self.convergence_threshold) and self.convergence_threshold > 0,
              "finite and > 0"),

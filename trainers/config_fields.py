@@ -15,7 +15,8 @@ LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_neg
                  "option_alpha": 0.0005,
                  "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15,
                  "intra_option_primitives": False, "option_interruption": False,
-                 "top_head": "fourier", "option_head": "fourier", "initiation": "logistic"}
+                 "top_head": "fourier", "option_head": "fourier", "initiation": "logistic",
+                 "max_branching": 3}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
@@ -29,7 +30,7 @@ LABEL_FIELDS = ("preset",)
 _DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestation_positives",
                      "initiation_start", "initiation_constrain", "one_class_fits",
                      "keep_negatives", "policy_start", "value_start", "value_bonus",
-                     "option_alpha", "gestation", "convergence_threshold")
+                     "option_alpha", "gestation", "convergence_threshold", "max_branching")
 _PIECES = ("top_head", "option_head", "initiation")
 UNREAD_FIELDS = {
     "flat": _DISCOVERY_FIELDS + _PIECES + ("options", "options_agent", "failure_bootstrap",

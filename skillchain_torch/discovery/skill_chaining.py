@@ -157,8 +157,8 @@ class SkillChaining(StepRules, EpisodeRules):
         self.policy_start, self.top_basis = policy_start, top_basis
         self.completion_reward = float(completion_reward)
         self._projection: Tensor | None = None
-        if gestation < 0 or max_branching < 1 or max_option_steps < 1:
-            raise ValueError("need gestation >= 0, max_branching >= 1, max_option_steps >= 1")
+        if gestation < 0 or max_branching < 0 or max_option_steps < 1:
+            raise ValueError("need gestation >= 0, max_branching >= 0, max_option_steps >= 1")
         self.bank = bank
         self.events = tuple(events)
         self.gestation, self.max_branching = int(gestation), int(max_branching)

@@ -181,3 +181,14 @@ def test_register_piece_adds_a_name_the_config_accepts():
         del pieces.INITIATIONS["wider"]
     with pytest.raises(ValueError, match="--initiation must be one of logistic, mlp"):
         SkillChainingAgent.build(2, initiation="wider", order=1)
+
+
+def test_max_branching_zero_is_the_same_agent_without_options():
+    """--max-branching 0: no event is ever listed, so no option is created: the flat baseline
+    of any top-level head (the neural one included)."""
+    cfg = TrainConfig(agent="skill-chaining", preset="paper", map="pinball_box", runs=2,
+                      episodes=3, max_episode_steps=200, max_branching=0, gestation=1,
+                      top_head="mlp")  # fmt: skip
+    trainer = PopulationTrainer(cfg).train()
+    assert not bool(trainer.agent.bank.live().any())
+    assert trainer.agent.top_learner.updates > 0
