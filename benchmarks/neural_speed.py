@@ -1,0 +1,115 @@
+"""Agent steps per second of neural skill chaining at P = 1, 10, 100, against a CleanRL-style DQN.
+
+    python benchmarks/neural_speed.py                     # MountainCar-v0, CPU
+    python benchmarks/neural_speed.py --device cuda       # where a GPU is lent
+    python benchmarks/neural_speed.py --steps 300 --populations 1 10   # a quick look
+
+The peer, run in the same process on the same env: a single-agent DQN loop written as CleanRL's
+``dqn.py`` writes it (a Gymnasium env stepped directly, an MLP of the same size as
+:class:`~skillchain_torch.modules.MLPQHead` (two tanh layers of 64), a tensor replay buffer,
+Adam at 1e-3, a minibatch of 32 every 4 steps, a target copy every 250 updates). The agent is
+``skillchain train``'s: ``TrainConfig(agent="skill-chaining", preset="paper", top_head="mlp",
+option_head="mlp", initiation="mlp")`` in a :class:`PopulationTrainer` (the env stepped through
+TorchRL's ``GymEnv``, discovery, option heads and classifiers included), timed over
+``--steps`` population steps after a warm-up. The ratio is (agent steps/s) / (DQN steps/s):
+above 1 the population does more agent steps per second than one DQN.
+
+Example (a few seconds)::
+
+    python benchmarks/neural_speed.py --steps 100 --dqn-steps 500 --populations 1 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import torch
+from torch import nn
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def dqn_steps_per_second(env_id: str, steps: int, device: str, seed: int = 0) -> float:
+    """CleanRL-style DQN: one env, one network, replay, epsilon 0.05 after a short decay."""
+    env = gym.make(env_id)
+    obs, _ = env.reset(seed=seed)
+    n_obs, n_act = env.observation_space.shape[0], env.action_space.n
+    net = nn.Sequential(nn.Linear(n_obs, 64), nn.Tanh(), nn.Linear(64, 64), nn.Tanh(),
+                        nn.Linear(64, n_act)).to(device)  # fmt: skip
+    target = nn.Sequential(*[type(m)(*m.weight.shape[::-1]) if isinstance(m, nn.Linear)
+                             else nn.Tanh() for m in net]).to(device)  # fmt: skip
+    target.load_state_dict(net.state_dict())
+    optimizer = torch.optim.Adam(net.parameters(), lr=1e-3)
+    size = 50_000
+    buf_obs = torch.zeros(size, n_obs, device=device)
+    buf_next = torch.zeros(size, n_obs, device=device)
+    buf_act = torch.zeros(size, dtype=torch.int64, device=device)
+    buf_rew = torch.zeros(size, device=device)
+    buf_done = torch.zeros(size, device=device)
+    g = torch.Generator().manual_seed(seed)
+    updates, start = 0, time.perf_counter()
+    for t in range(steps):
+        epsilon = max(0.05, 1.0 - t / 1000)
+        if float(torch.rand((), generator=g)) < epsilon:
+            action = int(torch.randint(n_act, (), generator=g))
+        else:
+            with torch.no_grad():
+                action = int(net(torch.as_tensor(obs, device=device)).argmax())
+        nxt, reward, terminated, truncated, _ = env.step(action)
+        i = t % size
+        buf_obs[i], buf_next[i] = torch.as_tensor(obs), torch.as_tensor(nxt)
+        buf_act[i], buf_rew[i], buf_done[i] = action, float(reward), float(terminated)
+        obs = nxt if not (terminated or truncated) else env.reset()[0]
+        if t >= 32 and t % 4 == 0:
+            idx = torch.randint(min(t + 1, size), (32,), generator=g).to(device)
+            with torch.no_grad():
+                best = target(buf_next[idx]).max(1).values
+                y = buf_rew[idx] + best * (1 - buf_done[idx])
+            q = net(buf_obs[idx]).gather(1, buf_act[idx, None])[:, 0]
+            loss = nn.functional.smooth_l1_loss(q, y)
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            updates += 1
+            if updates % 250 == 0:
+                target.load_state_dict(net.state_dict())
+    return steps / (time.perf_counter() - start)
+
+
+def agent_steps_per_second(env_id: str, population: int, steps: int, device: str) -> float:
+    from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+
+    cfg = TrainConfig(agent="skill-chaining", preset="paper", env=f"gymnasium:{env_id}",
+                      runs=population, episodes=10_000, seed=0, device=device,
+                      top_head="mlp", option_head="mlp", initiation="mlp")  # fmt: skip
+    trainer = PopulationTrainer(cfg)
+    trainer.train(max_agent_steps=min(steps, 50) * population)  # warm-up: imports, first fits
+    before, start = trainer.agent_steps, time.perf_counter()
+    trainer.train(max_agent_steps=before + steps * population)
+    return (trainer.agent_steps - before) / (time.perf_counter() - start)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", default="MountainCar-v0")
+    parser.add_argument("--populations", type=int, nargs="+", default=[1, 10, 100])
+    parser.add_argument("--steps", type=int, default=1000, help="population steps timed")
+    parser.add_argument("--dqn-steps", type=int, default=5000)
+    parser.add_argument("--device", default="cpu")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    dqn = dqn_steps_per_second(args.env, args.dqn_steps, args.device)
+    print(f"{args.env} on {args.device}, torch threads 1\n")
+    print("| run | agent steps/s | / CleanRL-style DQN |\n|---|---:|---:|")
+    print(f"| DQN, 1 agent | {dqn:,.0f} | 1.00x |")
+    for population in args.populations:
+        rate = agent_steps_per_second(args.env, population, args.steps, args.device)
+        print(f"| neural skill chaining, P = {population} | {rate:,.0f} | {rate / dqn:.2f}x |")
+
+
+if __name__ == "__main__":
+    main()
