@@ -192,3 +192,16 @@ def test_max_branching_zero_is_the_same_agent_without_options():
     trainer = PopulationTrainer(cfg).train()
     assert not bool(trainer.agent.bank.live().any())
     assert trainer.agent.top_learner.updates > 0
+
+
+@pytest.mark.cuda
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
+def test_neural_skill_chaining_runs_on_cuda():
+    cfg = TrainConfig(agent="skill-chaining", preset="paper", map="pinball_box", runs=4,
+                      episodes=2, max_episode_steps=300, gestation=1, device="cuda",
+                      top_head="mlp", option_head="mlp", initiation="mlp")  # fmt: skip
+    trainer = PopulationTrainer(cfg).train()
+    agent = trainer.agent
+    assert next(agent.q_head.parameters()).device.type == "cuda"
+    assert agent.bank.classifier.examples.device.type == "cuda"
+    assert agent.top_learner.updates > 0 and not agent.native
