@@ -1,6 +1,6 @@
-"""``MLPOptionQHead``: neural option Q-functions, one small MLP per ``(agent, slot)``, stacked
-with ``torch.func`` (a drop-in for :class:`~skillchain_torch.options.FourierOptionQHead` behind
-the same :class:`~skillchain_torch.options.OptionQHead` interface).
+"""``MLPOptionQHead``: neural option Q-functions, one small MLP per ``(agent, slot)``, their
+weights stacked ``[P, K, ...]`` (a drop-in for :class:`~skillchain_torch.options.
+FourierOptionQHead` behind the same :class:`~skillchain_torch.options.OptionQHead` interface).
 
 Example:
     >>> import torch
@@ -15,7 +15,7 @@ import math
 
 import torch
 from torch import Tensor, nn
-from torch.func import functional_call, grad, stack_module_state, vmap
+from torch.func import stack_module_state
 
 from skillchain_torch.options.q_head import _DTYPES, NUM_ACTIONS, OBS_DIM, OptionQHead, dtype_name
 from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask
@@ -47,19 +47,20 @@ class MLPOptionQHead(OptionQHead):
         loss_function: ``"smooth_l1"`` (Huber at 1 on the scaled error, the default: a
             gradient never larger than ``lr`` times the network's) or ``"l2"``
             (``0.5 (delta / q_scale)^2``).
-
-    Before this scaling the loss was ``0.5 delta^2`` on unscaled errors, so at ``q_scale=1000``
-    a TD error of 10^4 made a step 10^7 times ``lr`` (NaN after 78 updates).
         seed: int (agent p uses ``seed + p``) or ``LongTensor [P]``; initial weights of a slot
             come from a :class:`~skillchain_torch.rng.CounterRNG` stream of its agent.
 
     The P*K networks are ``torch.func.stack_module_state`` copies of one template held as
-    parameters ``[P, K, ...]`` and evaluated with ``vmap(functional_call)``. Hidden layers start
+    parameters ``[P, K, ...]`` and evaluated with one ``einsum`` per layer; a TD update is one
+    autograd pass over all of them (it was ``vmap(grad(...))``: 3 ms a step at P = 1, mostly
+    ``torch.func``'s bookkeeping). Before the scaled loss, the loss was ``0.5 delta^2`` on
+    unscaled errors, so at ``q_scale=1000`` a TD error of 10^4 made a step 10^7 times ``lr``
+    (NaN after 78 updates). Hidden layers start
     uniform in ``+-1/sqrt(fan_in)`` (PyTorch's default range); the output layer starts at zero so
     a fresh slot has ``Q = 0`` like the linear head. Each slot's loss depends only on its own
     parameters, so masked-out slots receive zero gradient and stay unchanged.
 
-    Not bit-reproducible across population sizes: vmapped ``matmul`` and autograd reductions
+    Not bit-reproducible across population sizes: batched ``matmul`` and autograd reductions
     may block differently for different P (the initial weights are, the trained ones need not
     be). Use :class:`FourierOptionQHead` where the population contract matters.
     """
@@ -116,55 +117,52 @@ class MLPOptionQHead(OptionQHead):
     def _key(name: str) -> str:
         return name.replace(".", "__")
 
-    def _stacked(self) -> dict[str, Tensor]:
-        n = self.population * self.slots
-        stacked = {}
-        for name in self._names:
-            param = self.params[self._key(name)]
-            stacked[name] = param.reshape(n, *param.shape[2:])
-        return stacked
+    def _layers(self) -> list[tuple[Tensor, Tensor]]:
+        """``(weight [P, K, out, in], bias [P, K, out])`` per layer, in order."""
+        return [(self.params[self._key(f"{i}.weight")], self.params[self._key(f"{i}.bias")])
+                for i in range(0, len(self._template), 2)]  # fmt: skip
 
-    def _net(self, params: dict[str, Tensor], x: Tensor) -> Tensor:
-        return functional_call(self._template, params, (x,)) * self.q_scale
-
-    def _inputs(self, obs: Tensor) -> Tensor:
+    def _values(self, obs: Tensor, layers=None) -> Tensor:
+        """``obs [P, D] -> Q [P, K, A]``: every (agent, slot) network at once, each on its
+        agent's state (one einsum per layer)."""
         self._check_obs(obs)
-        x = obs.to(self._dtype) * 2.0 - 1.0  # observations in [0, 1] -> [-1, 1]
-        return x[:, None, :].expand(-1, self.slots, -1).reshape(-1, self.obs_dim)
+        layers = self._layers() if layers is None else layers
+        x = (obs.to(self._dtype) * 2.0 - 1.0)  # observations in [0, 1] -> [-1, 1]
+        weight, bias = layers[0]
+        x = torch.einsum("pi,pkoi->pko", x, weight) + bias
+        for weight, bias in layers[1:]:
+            x = torch.einsum("pki,pkoi->pko", torch.tanh(x), weight) + bias
+        return x * self.q_scale
 
     def forward(self, obs: Tensor) -> Tensor:
-        q = vmap(self._net)(self._stacked(), self._inputs(obs))
-        return q.reshape(self.population, self.slots, self.num_actions)
+        return self._values(obs)
 
     def td_update(self, obs: Tensor, action: Tensor, target: Tensor, mask: Tensor) -> Tensor:
         mask = self._check_update(obs, action, target, mask)
         dtype = self._dtype
         act = torch.where(mask.any(-1), action.to(torch.int64), torch.zeros_like(action))
-        act = act[:, None].expand(-1, self.slots).reshape(-1)
-        weight = mask.reshape(-1).to(dtype)
-        goal = torch.where(mask, target.to(dtype), torch.zeros((), dtype=dtype)).reshape(-1)
-
-        huber = self.loss_function == "smooth_l1"
-
-        def slot_loss(params, x, a, y, m):
-            q_sa = torch.gather(self._net(params, x), 0, a[None])[0]
-            delta = y - q_sa
+        weight = mask.to(dtype)
+        goal = torch.where(mask, target.to(dtype), torch.zeros((), dtype=dtype))
+        layers = [(w.detach().requires_grad_(), b.detach().requires_grad_())
+                  for w, b in self._layers()]  # fmt: skip
+        with torch.enable_grad():
+            q = self._values(obs, layers)  # [P, K, A]
+            q_sa = q.gather(2, act[:, None, None].expand(-1, self.slots, 1))[..., 0]
+            delta = goal - q_sa
             e = delta / self.q_scale
-            if huber:  # 0.5 e^2 inside [-1, 1], |e| - 0.5 outside
+            if self.loss_function == "smooth_l1":  # 0.5 e^2 inside [-1, 1], |e| - 0.5 outside
                 size = e.abs()
                 loss = torch.where(size <= 1.0, 0.5 * e * e, size - 0.5)
             else:
                 loss = 0.5 * e * e
-            return m * loss, delta
-
+            # Each slot's loss reads only its own parameters: a masked-out slot's gradient is 0.
+            flat = [t for pair in layers for t in pair]
+            grads = torch.autograd.grad((weight * loss).sum(), flat)
         with torch.no_grad():
-            grads, delta = vmap(grad(slot_loss, has_aux=True))(
-                self._stacked(), self._inputs(obs), act, goal, weight
-            )
-            for name in self._names:
-                param = self.params[self._key(name)]
-                param.sub_(self.lr * grads[name].reshape(param.shape))
-        delta = delta.reshape(self.population, self.slots)
+            for (w, b), (gw, gb) in zip(self._layers(), zip(grads[0::2], grads[1::2])):
+                w.sub_(self.lr * gw)
+                b.sub_(self.lr * gb)
+        delta = delta.detach()
         return torch.where(mask, delta, torch.zeros_like(delta))
 
     def slot_tensors(self) -> dict[str, Tensor]:
