@@ -3,6 +3,7 @@ episodes, with 95% Welch intervals (Student's t quantile), options held, and how
 
     python results/option-learning/compare.py screen     # seeds 0-19 (screening only)
     python results/option-learning/compare.py confirm    # seeds 1000+ (the evidence)
+    python results/option-learning/compare.py screen-hard   # any folder of variants
 
 Reads ``<block>/<variant>/{returns,n_options,option_outcomes}.npy`` (``flat`` is the baseline)
 and writes ``<block>/tables.md`` and ``<block>/curves.png``.
@@ -15,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci, t_quantile
 
 HERE = Path(__file__).resolve().parent
 
@@ -95,12 +96,12 @@ def figure(runs: dict, path: Path) -> None:
         kernel = np.ones(10) / 10  # a 10-episode moving average, per run
         smooth = np.array([np.convolve(row, kernel, mode="valid") for row in x])
         m = smooth.mean(0)
-        h = 1.96 * smooth.std(0, ddof=1) / np.sqrt(len(smooth))
+        h = t_quantile(0.975, len(smooth) - 1) * smooth.std(0, ddof=1) / np.sqrt(len(smooth))
         e = np.arange(10, x.shape[1] + 1)
         ax.plot(e, m, label=f"{name} ({len(x)} runs)")
         ax.fill_between(e, m - h, m + h, alpha=0.2)
     ax.set_xlabel("episode")
-    ax.set_ylabel("return (10-episode moving average)")
+    ax.set_ylabel("return (10-episode moving average, 95% t band)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -110,7 +111,7 @@ def figure(runs: dict, path: Path) -> None:
 def main() -> None:
     block = HERE / (sys.argv[1] if len(sys.argv) > 1 else "screen")
     runs = load(block)
-    lines = [f"# Option-learning study: {block.name}", "", *tables(runs), ""]
+    lines = [f"# {block.name}: each variant against flat", "", *tables(runs), ""]
     (block / "tables.md").write_text("\n".join(lines))
     figure(runs, block / "curves.png")
     print("\n".join(lines))
