@@ -134,6 +134,8 @@ class EpisodeProtocol:
             **({} if self.optimizer is None else {"optimizer": self.optimizer.state_dict()}),
             **({"top_learner": self.top_learner.state_dict()}
                if hasattr(getattr(self, "top_learner", None), "state_dict") else {}),
+            **({"option_replay": self.bank.q_head.replay.state_dict()}
+               if getattr(self.bank.q_head, "replay", None) is not None else {}),
         }
 
     def load_state_dict(self, state, strict: bool = True, assign: bool = False):
@@ -144,6 +146,8 @@ class EpisodeProtocol:
             self.optimizer.load_state_dict(state["optimizer"])
         if "top_learner" in state:
             self.top_learner.load_state_dict(state["top_learner"])
+        if "option_replay" in state:
+            self.bank.q_head.replay.load_state_dict(state["option_replay"])
         self.bank.load_state_dict(state["bank"])
         self.rng.load_state_dict(state["rng"])
         self.rng.to(device)

@@ -7,8 +7,8 @@ registry           ``"fourier"`` / ``"logistic"`` (the paper's)   ``"mlp"`` (neu
 =================  =============================================  ==============================
 :data:`TOP_HEADS`  LinearQHead on a Fourier basis, SMDP Sarsa     MLPQHead on the observation,
                    in closed form                                 Huber loss, target net, replay
-:data:`OPTION_     FourierOptionQHead, Q-learning at alpha_o      MLPOptionQHead (scaled errors)
-HEADS`
+:data:`OPTION_     FourierOptionQHead, Q-learning at alpha_o      MLPOptionQHead (scaled errors),
+HEADS`                                                            OptionReplay, target net
 :data:`INITIA-     InitiationClassifier (logistic, quadratic)     MLPInitiationClassifier
 TIONS`
 =================  =============================================  ==============================
@@ -38,7 +38,7 @@ import torch
 from torch import nn
 
 from skillchain_torch.modules import MLPQHead
-from skillchain_torch.objectives import ReplayTD, SMDPSarsaLoss
+from skillchain_torch.objectives import OptionReplay, ReplayTD, SMDPSarsaLoss
 from skillchain_torch.options import MLPInitiationClassifier, MLPOptionQHead, OptionBank
 
 __all__ = ["INITIATIONS", "OPTION_HEADS", "TOP_HEADS", "assemble_bank", "register_piece",
@@ -62,9 +62,13 @@ def _mlp_top(population: int, obs_dim: int, num_decisions: int, gamma: float, se
 
 def _mlp_option_head(population: int, slots: int, num_actions: int, obs_dim: int, seed: int,
                      device, **_: Any):  # fmt: skip
-    return MLPOptionQHead(population, slots, hidden=32, layers=2, num_actions=num_actions,
+    head = MLPOptionQHead(population, slots, hidden=32, layers=2, num_actions=num_actions,
                           lr=0.01, q_scale=VALUE_SCALE, seed=seed, device=device,
                           obs_dim=obs_dim)  # fmt: skip
+    first = int(seed.reshape(-1)[0]) if isinstance(seed, torch.Tensor) else int(seed)
+    head.replay = OptionReplay(capacity=50_000, batch_size=32, train_every=4,
+                               target_update=250, seed=first + 1)  # fmt: skip
+    return head
 
 
 def _mlp_initiation(classifier) -> MLPInitiationClassifier:

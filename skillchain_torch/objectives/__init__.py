@@ -1,9 +1,10 @@
 """Update rules ("objectives" in TorchRL terms): closed-form TD steps for the linear heads
 (:class:`SarsaUpdate`, :class:`IntraOptionQLearning`) and the same rules as TorchRL loss modules
 (:class:`SMDPSarsaLoss`, :class:`IntraOptionQLoss`) for heads trained by an optimizer, and
-:class:`ReplayTD`, replay and a target network for neural heads."""
+:class:`ReplayTD` and :class:`OptionReplay`, replay and target networks for neural heads."""
 
 from skillchain_torch.objectives.intra_option_loss import IntraOptionQLoss
+from skillchain_torch.objectives.option_replay import OptionReplay
 from skillchain_torch.objectives.q_learning import (
     IntraOptionQLearning,
     option_td_target,
@@ -16,6 +17,7 @@ from skillchain_torch.objectives.smdp_sarsa_loss import SMDPSarsaLoss
 __all__ = [
     "IntraOptionQLearning",
     "IntraOptionQLoss",
+    "OptionReplay",
     "ReplayTD",
     "SMDPSarsaLoss",
     "SarsaUpdate",

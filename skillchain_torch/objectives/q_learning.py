@@ -171,6 +171,10 @@ class IntraOptionQLearning(nn.Module):
         for name, value in (("reward", reward), ("env_terminated", env_terminated)):
             if value.numel() != population:
                 raise ValueError(f"{name} must be [P={population}], got {tuple(value.shape)}")
+        replay = getattr(q_head, "replay", None)
+        if replay is not None:  # stored with its mask, learned from in sampled minibatches
+            return replay(q_head, obs, action, reward, next_obs, env_terminated,
+                          target_reached, mask, self.gamma, self.completion_reward)  # fmt: skip
         if not bool(mask.any()):
             return torch.zeros(mask.shape, dtype=torch.float64, device=mask.device)
         checked = code is None  # a caller passing codes vouches for its inputs

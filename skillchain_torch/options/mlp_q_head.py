@@ -111,7 +111,18 @@ class MLPOptionQHead(OptionQHead):
         seeds = agent_seeds(seed, population)
         self.register_buffer("rng_seeds", seeds.to(device))
         self.register_buffer("rng_counter", torch.zeros_like(self.rng_seeds))
+        # How many times each slot was reset (a new option took it): replayed transitions of
+        # a slot's earlier occupant are not learned from (OptionReplay).
+        self.register_buffer("slot_epoch", torch.zeros(population, slots, dtype=torch.int64,
+                                                       device=device))  # fmt: skip
+        self.replay = None  # an OptionReplay: learn from sampled minibatches, not each step
         self.reset_slots(torch.ones(population, slots, dtype=torch.bool, device=device))
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        key = prefix + "slot_epoch"  # banks saved before the epochs were kept: no resets yet
+        if key not in state_dict:
+            state_dict[key] = torch.ones_like(self.slot_epoch)
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     @staticmethod
     def _key(name: str) -> str:
@@ -123,22 +134,28 @@ class MLPOptionQHead(OptionQHead):
                 for i in range(0, len(self._template), 2)]  # fmt: skip
 
     def _values(self, obs: Tensor, layers=None) -> Tensor:
-        """``obs [P, D] -> Q [P, K, A]``: every (agent, slot) network at once, each on its
-        agent's state (one einsum per layer)."""
-        self._check_obs(obs)
+        """``obs [*B, P, D] -> Q [*B, P, K, A]``: every (agent, slot) network at once, each on
+        its agent's states (one einsum per layer)."""
         layers = self._layers() if layers is None else layers
         x = (obs.to(self._dtype) * 2.0 - 1.0)  # observations in [0, 1] -> [-1, 1]
         weight, bias = layers[0]
-        x = torch.einsum("pi,pkoi->pko", x, weight) + bias
+        x = torch.einsum("...pi,pkoi->...pko", x, weight) + bias
         for weight, bias in layers[1:]:
-            x = torch.einsum("pki,pkoi->pko", torch.tanh(x), weight) + bias
+            x = torch.einsum("...pki,pkoi->...pko", torch.tanh(x), weight) + bias
         return x * self.q_scale
 
     def forward(self, obs: Tensor) -> Tensor:
+        self._check_obs(obs)
         return self._values(obs)
 
     def td_update(self, obs: Tensor, action: Tensor, target: Tensor, mask: Tensor) -> Tensor:
         mask = self._check_update(obs, action, target, mask)
+        return self.step(obs, action, target, mask)
+
+    def step(self, obs: Tensor, action: Tensor, target: Tensor, mask: Tensor) -> Tensor:
+        """One SGD step on the summed loss of the scaled TD errors, over any leading batch
+        dims: ``obs [*B, P, D]``, ``action [*B, P]``, ``target``/``mask [*B, P, K]`` (a
+        replayed minibatch, or :meth:`td_update`'s one step); ``delta [*B, P, K]``."""
         dtype = self._dtype
         act = torch.where(mask.any(-1), action.to(torch.int64), torch.zeros_like(action))
         weight = mask.to(dtype)
@@ -146,9 +163,9 @@ class MLPOptionQHead(OptionQHead):
         layers = [(w.detach().requires_grad_(), b.detach().requires_grad_())
                   for w, b in self._layers()]  # fmt: skip
         with torch.enable_grad():
-            q = self._values(obs, layers)  # [P, K, A]
-            q_sa = q.gather(2, act[:, None, None].expand(-1, self.slots, 1))[..., 0]
-            delta = goal - q_sa
+            q = self._values(obs, layers)  # [*B, P, K, A]
+            index = act[..., None, None].expand(*act.shape, self.slots, 1)
+            delta = goal - q.gather(-1, index)[..., 0]
             e = delta / self.q_scale
             if self.loss_function == "smooth_l1":  # 0.5 e^2 inside [-1, 1], |e| - 0.5 outside
                 size = e.abs()
@@ -157,7 +174,8 @@ class MLPOptionQHead(OptionQHead):
                 loss = 0.5 * e * e
             # Each slot's loss reads only its own parameters: a masked-out slot's gradient is 0.
             flat = [t for pair in layers for t in pair]
-            grads = torch.autograd.grad((weight * loss).sum(), flat)
+            batch = max(1, weight[..., 0, 0].numel())  # the mean over replayed steps
+            grads = torch.autograd.grad((weight * loss).sum() / batch, flat)
         with torch.no_grad():
             for (w, b), (gw, gb) in zip(self._layers(), zip(grads[0::2], grads[1::2])):
                 w.sub_(self.lr * gw)
@@ -171,6 +189,7 @@ class MLPOptionQHead(OptionQHead):
     @torch.no_grad()
     def reset_slots(self, mask: Tensor) -> None:
         mask = check_slot_mask(mask, self.population, self.slots)
+        self.slot_epoch += mask.to(self.slot_epoch)
         output = f"{len(self._template) - 1}."  # the output layer's weight and bias start at 0
         sizes = [self.params[self._key(n)][0, 0].numel() for n in self._names]
         rng = CounterRNG(self.rng_seeds, stream=0x0B7, counter=self.rng_counter)
@@ -203,6 +222,7 @@ class MLPOptionQHead(OptionQHead):
         with torch.no_grad():
             for key, param in self.params.items():
                 new.params[key].copy_(param[index])
+            new.slot_epoch.copy_(self.slot_epoch[index])
             if seeds is None:
                 new.rng_counter.copy_(self.rng_counter[index])
         return new

@@ -14,7 +14,12 @@ from torch import nn
 from skillchain_torch.agents import SkillChainingAgent
 from skillchain_torch.interfaces import InitiationSet, ValueHead, missing_methods
 from skillchain_torch.modules import MLPQHead
-from skillchain_torch.objectives import IntraOptionQLearning, ReplayTD, SMDPSarsaLoss
+from skillchain_torch.objectives import (
+    IntraOptionQLearning,
+    OptionReplay,
+    ReplayTD,
+    SMDPSarsaLoss,
+)
 from skillchain_torch.options import MLPInitiationClassifier, MLPOptionQHead, OptionBank
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
@@ -111,9 +116,32 @@ def test_mlp_classifier_reset_slot_starts_afresh_and_agents_are_their_own():
     assert torch.equal(a.layer_biases[-1][0, 1], torch.zeros(1, dtype=F64))
 
 
+def test_option_replay_approaches_the_chains_return_and_forgets_a_slots_predecessor():
+    head = MLPOptionQHead(P, 2, hidden=32, lr=0.05, q_scale=1000.0)
+    head.replay = OptionReplay(batch_size=16, train_every=1, target_update=50, seed=0)
+    update = IntraOptionQLearning(gamma=1.0, completion_reward=GOAL)
+    g = torch.Generator().manual_seed(2)
+    only_first = torch.tensor([[True, False]] * P)  # slot 1 never in its set: learns nothing
+    for _ in range(1500):
+        i = torch.randint(0, N - 1, (P,), generator=g)
+        update(head, chain_obs(i), torch.zeros(P, dtype=torch.long), -torch.ones(P, dtype=F64),
+               chain_obs(i + 1), torch.zeros(P, dtype=torch.bool), only_first,
+               (i + 1 == N - 1)[:, None].expand(-1, 2))  # fmt: skip
+    q = torch.stack([head(chain_obs(torch.full((P,), k)))[:, :, 0] for k in range(N - 1)])
+    assert (q[..., 0] - TRUE[:, None]).abs().max() < 0.05 * GOAL
+    assert float(q[..., 1].abs().max()) == 0.0  # untouched: masked out of every sample
+    assert head.replay.updates > 1000
+    # A new option takes slot 0: the stored transitions are its predecessor's, so a replayed
+    # step leaves the fresh slot where it starts (Q = 0).
+    head.reset_slots(torch.tensor([[True, False]] * P))
+    head.replay._learn(head, 1.0, GOAL)
+    assert float(head(chain_obs(torch.zeros(P)))[:, 0].abs().max()) == 0.0
+
+
 def neural_agent(population=2, slots=4, seed=0):
-    bank = OptionBank(population, slots,
-                      MLPOptionQHead(population, slots, hidden=16, lr=0.05, seed=seed),
+    option_head = MLPOptionQHead(population, slots, hidden=16, lr=0.05, seed=seed)
+    option_head.replay = OptionReplay(batch_size=16, train_every=2, target_update=50, seed=seed)
+    bank = OptionBank(population, slots, option_head,
                       MLPInitiationClassifier(population, slots, capacity=100, hidden=8,
                                               sweeps=20, seed=seed))  # fmt: skip
     head = MLPQHead(4, 5 + slots, population, hidden=32, seed=seed)
@@ -132,7 +160,7 @@ def test_a_neural_skill_chaining_agent_trains_chains_and_resumes(tmp_path):
     agent = neural_agent()
     assert not agent.native and not agent.closed_form
     whole = PopulationTrainer(cfg, out_dir=tmp_path / "whole", agent=agent).train()
-    assert agent.top_learner.updates > 0
+    assert agent.top_learner.updates > 0 and agent.bank.q_head.replay.stored > 0
     assert bool((agent.bank.status > 0).any())  # discovery created options
     assert all(torch.isfinite(p).all() for p in agent.q_head.parameters())
     # Interrupted after 2 episodes and resumed: the same returns.
