@@ -77,6 +77,8 @@ class MLPQHead(nn.Module):
             raise ValueError(f"seed must be an int or [P={population}] seeds, got {len(seeds)}")
         self.config = dict(hidden=int(hidden), layers=int(layers), value_scale=self.value_scale)
         sizes = [self.num_features] + [int(hidden)] * int(layers) + [self.num_decisions]
+        # set_values calls so far (saved: a resumed learner compares its count with it)
+        self.register_buffer("writes", torch.zeros((), dtype=torch.int64))
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
         for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
@@ -127,6 +129,7 @@ class MLPQHead(nn.Module):
         output weights go to 0 and its bias to ``value / value_scale``."""
         weight, bias = self.weights[-1], self.biases[-1]
         m = mask.to(device=weight.device, dtype=torch.bool)
+        self.writes += 1  # (a learner's target copy refreshes when it sees a write)
         weight.copy_(torch.where(m[:, None, :], torch.zeros_like(weight), weight))
         target = (value.to(bias) / self.value_scale)
         bias.copy_(torch.where(m, target, bias))

@@ -65,6 +65,7 @@ class OptionReplay:
                                    generator=self.generator)  # fmt: skip
         self.stored = self.updates = 0
         self.target: list[tuple[Tensor, Tensor]] | None = None
+        self._epochs = -1  # the heads' reset count at the last target copy
 
     def __call__(self, head, obs: Tensor, action: Tensor, reward: Tensor, next_obs: Tensor,
                  terminated: Tensor, reached: Tensor, mask: Tensor, gamma: float,
@@ -95,7 +96,10 @@ class OptionReplay:
     def _learn(self, head, gamma: float, completion_reward) -> None:
         from skillchain_torch.objectives.q_learning import option_td_target
 
-        if self.target is None or self.updates % self.target_update == 0:
+        epochs = int(head.slot_epoch.sum())  # a new option took a slot: copy its fresh net
+        if (self.target is None or self.updates % self.target_update == 0
+                or epochs != self._epochs):  # fmt: skip
+            self._epochs = epochs
             self.target = [(w.detach().clone(), b.detach().clone()) for w, b in head._layers()]
         batch = self.buffer.sample()  # [B, P]
         B, P, K = batch.shape[0], head.population, head.slots
@@ -115,10 +119,11 @@ class OptionReplay:
 
     def state_dict(self) -> dict:
         return {"buffer": self.buffer.state_dict(), "generator": self.generator.get_state(),
-                "stored": self.stored, "updates": self.updates, "target": self.target}
+                "stored": self.stored, "updates": self.updates, "target": self.target,
+                "epochs": self._epochs}
 
     def load_state_dict(self, state: dict) -> None:
         self.buffer.load_state_dict(state["buffer"])
         self.generator.set_state(state["generator"])
         self.stored, self.updates = int(state["stored"]), int(state["updates"])
-        self.target = state["target"]
+        self.target, self._epochs = state["target"], int(state["epochs"])

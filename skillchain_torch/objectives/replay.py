@@ -81,6 +81,7 @@ class ReplayTD:
         self.updater = (HardUpdate(loss, value_network_update_interval=int(target_update))
                         if targets else None)  # fmt: skip
         self.train_every, self.stored, self.updates = int(train_every), 0, 0
+        self._writes = 0  # the head's set_values count when the target was last copied
 
     def __call__(self, td: TensorDictBase) -> Tensor:
         if hasattr(self.loss, "td_error"):
@@ -100,12 +101,20 @@ class ReplayTD:
             self.updates += 1
             if self.updater is not None:
                 self.updater.step()
+        writes = int(getattr(getattr(self.loss, "value_head", None), "writes", 0))
+        if writes != self._writes and self.updater is not None:
+            # Discovery set a joining option's value: the target copy takes it now, or targets
+            # would bootstrap from the slot's stale value until the next scheduled copy.
+            for name, target in self.loss.named_children():
+                if name.startswith("target_"):
+                    target.data.copy_(getattr(self.loss, name[len("target_"):]).data)
+            self._writes = writes
         return delta
 
     def state_dict(self) -> dict:
         return {"buffer": self.buffer.state_dict(), "optimizer": self.optimizer.state_dict(),
                 "generator": self.generator.get_state(), "updates": self.updates,
-                "stored": self.stored,
+                "stored": self.stored, "writes": self._writes,
                 "targets": self.loss.state_dict(),
                 "counter": getattr(self.updater, "counter", 0)}  # fmt: skip
 
@@ -114,6 +123,7 @@ class ReplayTD:
         self.optimizer.load_state_dict(state["optimizer"])
         self.generator.set_state(state["generator"])
         self.updates, self.stored = int(state["updates"]), int(state["stored"])
+        self._writes = int(state.get("writes", 0))
         self.loss.load_state_dict(state["targets"])
         if self.updater is not None:
             self.updater.counter = int(state["counter"])

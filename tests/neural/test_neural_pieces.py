@@ -233,3 +233,24 @@ def test_neural_skill_chaining_runs_on_cuda():
     assert next(agent.q_head.parameters()).device.type == "cuda"
     assert agent.bank.classifier.examples.device.type == "cuda"
     assert agent.top_learner.updates > 0 and not agent.native
+
+
+def test_a_joining_options_value_reaches_the_target_network_at_once():
+    """Discovery's set_values writes the online head; the replay learner copies the target at
+    its next call instead of bootstrapping from the slot's stale value until a scheduled copy."""
+    head = MLPQHead(2, 3, P, hidden=8, value_scale=10.0)
+    loss = SMDPSarsaLoss(head, loss_function="smooth_l1", value_scale=10.0, delay_value=True)
+    learner = ReplayTD(loss, torch.optim.Adam(head.parameters(), lr=1e-2), batch_size=4,
+                       target_update=10_000)  # fmt: skip
+    phi = torch.zeros(P, 2, dtype=F64)
+    yes, no = torch.ones(P, dtype=torch.bool), torch.zeros(P, dtype=torch.bool)
+    td = TensorDict(phi=phi, decision=torch.tensor([0, 1]), decision_return=torch.ones(P),
+                    duration=torch.ones(P, dtype=torch.long), next_value=torch.zeros(P),
+                    terminated=no, active=yes, next_phi=phi, next_decision=torch.tensor([2, 2]),
+                    batch_size=[P]).to(F64)  # fmt: skip
+    for _ in range(8):
+        learner(td)
+    head.set_values(torch.tensor([[False, False, True]] * P), torch.full((P, 3), 77.0, dtype=F64))
+    learner(td)
+    with loss.target_value_head_params.to_module(head):
+        assert head(phi)[:, 2].tolist() == [77.0, 77.0]
