@@ -37,6 +37,8 @@ from tensordict import TensorDict
 from torch import Tensor
 from torchrl.data import LazyTensorStorage, ReplayBuffer
 
+from skillchain_torch.objectives.replay import store
+
 __all__ = ["OptionReplay"]
 
 
@@ -87,7 +89,7 @@ class OptionReplay:
                           next_obs=next_obs, terminated=terminated.reshape(P).to(torch.bool),
                           reached=reached, mask=mask, epoch=head.slot_epoch.clone(),
                           batch_size=[P])  # fmt: skip
-        self.buffer.extend(item.unsqueeze(0))  # one item of batch [P]
+        store(self.buffer, item)
         self.stored += 1
         if len(self.buffer) >= self.warmup and self.stored % self.train_every == 0:
             self._learn(head, gamma, completion_reward)

@@ -35,13 +35,27 @@ Example:
 
 from __future__ import annotations
 
+import logging
+
 import torch
 from tensordict import TensorDictBase
 from torch import Tensor
 from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.objectives import HardUpdate, LossModule
 
-__all__ = ["ReplayTD"]
+__all__ = ["ReplayTD", "store"]
+
+
+def store(buffer: ReplayBuffer, item: TensorDictBase) -> None:
+    """Add one population step ``item [P]`` to ``buffer`` as one element, without TorchRL's
+    INFO line when the first one allocates the storage (it would break a run's quiet output)."""
+    logger = logging.getLogger("torchrl")
+    level = logger.level
+    logger.setLevel(max(level, logging.WARNING))
+    try:
+        buffer.extend(item.unsqueeze(0))
+    finally:
+        logger.setLevel(level)
 
 
 class ReplayTD:
@@ -91,7 +105,7 @@ class ReplayTD:
                 delta = self.loss(td)["td_error"]
         if not bool(td.get("active").any()):
             return delta
-        self.buffer.extend(td.detach().clone().unsqueeze(0))  # one item of batch [P]
+        store(self.buffer, td.detach().clone())
         self.stored += 1
         if len(self.buffer) >= self.warmup and self.stored % self.train_every == 0:
             batch = self.buffer.sample()
