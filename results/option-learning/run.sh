@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Issue 30's option-learning runs on the simple or hard instance, 250 episodes, two workers, checkpoints
-# every 25 episodes; a variant whose folder exists but has no returns.npy is resumed.
+# every 25 episodes (WORKERS=1 for one process); a variant whose folder exists but has no
+# returns.npy is resumed.
 #   bash results/option-learning/run.sh screen NAME [train flags...]   # seeds 0-19, 20 runs
 #   bash results/option-learning/run.sh confirm NAME [train flags...]  # seeds 1000-1099, 100 runs
 #   screen-hard / confirm-hard: the same blocks on pinball_hard_two_starts
@@ -18,6 +19,6 @@ case $block in
 esac
 out=results/option-learning/$block/$name
 if [ -f "$out/returns.npy" ]; then echo "$name: done"; exit 0; fi
-if [ -d "$out" ]; then exec .venv/bin/skillchain train --resume "$out" --workers 2 --quiet; fi
+if [ -d "$out" ]; then exec .venv/bin/skillchain train --resume "$out" --workers "${WORKERS:-2}" --quiet; fi
 exec .venv/bin/skillchain train --map "$map" --runs "$runs" --episodes 250 \
-  --seed "$seed" --workers 2 --checkpoint-every 25 --quiet --out "$out" "$@"
+  --seed "$seed" --workers "${WORKERS:-2}" --checkpoint-every 25 --quiet --out "$out" "$@"
