@@ -74,7 +74,7 @@ def _mlp_option_head(population: int, slots: int, num_actions: int, obs_dim: int
 def _mlp_initiation(classifier) -> MLPInitiationClassifier:
     """The logistic classifier's store and rule settings, with an MLP per slot."""
     kept = {k: v for k, v in classifier.config.items() if k not in ("degree", "lr", "sweeps")}
-    return MLPInitiationClassifier(hidden=32, layers=2, lr=0.01, sweeps=100,
+    return MLPInitiationClassifier(hidden=16, layers=2, lr=0.02, sweeps=30,
                                    seed=classifier.seeds.clone(),
                                    device=classifier.seeds.device, **kept)  # fmt: skip
 

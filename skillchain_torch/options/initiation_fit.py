@@ -59,7 +59,10 @@ def snapshot(clf) -> Tensor:
 
 
 def _own_slot_logits(clf, examples: Tensor) -> Tensor:
-    """Slot k's logit at slot k's examples: ``examples [P, K, L, D] -> [P, K, L]``."""
+    """Slot k's logit at slot k's examples: ``examples [P, K, L, D] -> [P, K, L]`` (by the
+    model's ``own_logits`` where it has one: a per-slot model need not run every slot)."""
+    if hasattr(clf, "own_logits"):
+        return clf.own_logits(examples, torch.arange(examples.shape[0]))
     P, K, L, D = examples.shape
     z = clf.logit(examples.reshape(P, K * L, D)).reshape(P, K, L, K)
     return z.diagonal(dim1=1, dim2=3).permute(0, 2, 1)  # [P, L, K] -> [P, K, L]
@@ -73,9 +76,14 @@ def gradient_fit(clf, mask: Tensor, length: int) -> None:
     if not params:
         raise ValueError(f"{type(clf).__name__} overrides logit but has no parameter with "
                          "requires_grad=True: nothing to fit")  # fmt: skip
-    examples = clf.examples[:, :, :length]
-    y = clf.labels[:, :, :length].to(examples.dtype)
-    stored = (torch.arange(length, device=y.device) < clf.count[..., None]) & mask[..., None]
+    # A model with own_logits(examples, agents) computes only the agents that fit (episodes
+    # end a few agents at a time); the others' parameters get no gradient, so no step.
+    rows = mask.any(-1).nonzero()[:, 0] if hasattr(clf, "own_logits") else None
+    pick = slice(None) if rows is None else rows
+    examples = clf.examples[pick, :, :length]
+    y = clf.labels[pick, :, :length].to(examples.dtype)
+    count, mask = clf.count[pick], mask[pick]
+    stored = (torch.arange(length, device=y.device) < count[..., None]) & mask[..., None]
     s = stored.to(y.dtype)
     if clf.balanced:  # each class's examples share half of a slot's loss
         positives = (s * y).sum(-1, keepdim=True)
@@ -87,7 +95,7 @@ def gradient_fit(clf, mask: Tensor, length: int) -> None:
     optimizer = clf.make_optimizer(params)
     for _ in range(clf.sweeps):
         optimizer.zero_grad()
-        z = _own_slot_logits(clf, examples)
+        z = _own_slot_logits(clf, examples) if rows is None else clf.own_logits(examples, rows)
         loss = functional.binary_cross_entropy_with_logits(z, y, weight=weight, reduction="sum")
         loss.backward()
         optimizer.step()

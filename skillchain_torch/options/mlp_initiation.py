@@ -90,6 +90,18 @@ class MLPInitiationClassifier(InitiationClassifier):
             x = torch.einsum("pkni,pkio->pkno", torch.tanh(x), weight) + bias[:, :, None, :]
         return x[..., 0].transpose(1, 2).reshape(self.population, *lead, self.slots)
 
+    def own_logits(self, examples: Tensor, agents: Tensor) -> Tensor:
+        """``examples [N, K, L, D]`` of agents ``agents [N]`` ``-> [N, K, L]``: slot k's
+        network on slot k's examples only (what a fit needs; :meth:`logit` would run every slot
+        on every slot's examples of every agent, K x P / N times the work)."""
+        x = 2.0 * examples.to(self.examples.dtype) - 1.0
+        x = torch.einsum("pkld,pkdo->pklo", x, self.layer_weights[0][agents])
+        x = x + self.layer_biases[0][agents][:, :, None, :]
+        for weight, bias in zip(self.layer_weights[1:], self.layer_biases[1:]):
+            x = torch.einsum("pkli,pkio->pklo", torch.tanh(x), weight[agents])
+            x = x + bias[agents][:, :, None, :]
+        return x[..., 0]
+
     def make_optimizer(self, params: list[nn.Parameter]) -> torch.optim.Optimizer:
         return torch.optim.Adam(params, lr=self.lr)
 
