@@ -4,8 +4,9 @@
 
 For each ``<env>/`` with finished variants: ``tables.md`` and ``curves.png`` (each variant
 against ``flat``, 95% Student-t intervals, through ``results/option-learning/compare.py``), and
-for each skill-chaining variant ``<variant>/initiation_sets.png``: agent 0's options, each set
-drawn over the states the agent visited (the examples its classifier stored), on the first two
+for each skill-chaining variant ``<variant>/initiation_sets.png``: the options of the agent
+holding the most, each set
+drawn over the states that agent visited (the examples its classifier stored), on the first two
 observation dims (in the unit box: MountainCar's position and velocity, Acrobot's cos and sin
 of the first joint, Pinball's x and y). ``option_trajectory.png`` (one greedy episode
 coloured by the option in control) is written by ``skillchain train`` itself.
@@ -29,9 +30,10 @@ def compare_module():
     return module
 
 
-def initiation_sets(run: Path, agent: int = 0, limit: int = 8, dims=(0, 1)) -> None:
-    """Agent ``agent``'s options' sets over states it visited: every example its classifier
-    stored (any slot: real states), coloured where the option's set holds it."""
+def initiation_sets(run: Path, agent: int | None = None, limit: int = 8, dims=(0, 1)) -> None:
+    """An agent's options' sets over states it visited: every example its classifier stored
+    (any slot: real states), coloured where the option's set holds it (default: the agent
+    holding the most options, then the most stored states)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -42,6 +44,8 @@ def initiation_sets(run: Path, agent: int = 0, limit: int = 8, dims=(0, 1)) -> N
 
     bank = OptionBank.load(run / "options.pt")
     clf = bank.classifier
+    if agent is None:  # most options, then most stored states
+        agent = int((bank.live().sum(-1) * 10**6 + clf.count.sum(-1)).argmax())
     slots = bank.live()[agent].nonzero().flatten().tolist()[:limit]
     stored = torch.arange(clf.examples.shape[2])[None, :] < clf.count[agent][:, None]  # [K, C]
     points = clf.examples[agent][stored]  # [N, D]: states this agent visited
