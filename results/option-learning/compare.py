@@ -59,10 +59,11 @@ def tables(runs: dict) -> list[str]:
                 star = "**" if abs(d) > h else ""
                 cells.append(f"{star}{fmt(d, h)}{star}")
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    outcome_windows = list(dict.fromkeys(windows[2:4] + windows[-1:]))  # (each once)
     lines += ["", "## Options held, and how executions ended (all runs' executions in the "
-              "window)", "", "| variant | options at 25 / 50 / 250 | max options | "
-              + " | ".join(f"success / timeout {a}-{b}" for a, b in windows[2:4] + windows[-1:])
-              + " |", "|---|---|---|" + "---|" * 3]  # fmt: skip
+              "window)", "", f"| variant | options at 25 / 50 / {episodes} | max options | "
+              + " | ".join(f"success / timeout {a}-{b}" for a, b in outcome_windows)
+              + " |", "|---|---|---|" + "---|" * len(outcome_windows)]  # fmt: skip
     for name in names:
         r = runs[name]
         n = r.get("n_options")
@@ -71,7 +72,7 @@ def tables(runs: dict) -> list[str]:
             held = " / ".join(f"{n[:, e - 1].mean():.1f}" for e in (25, 50, episodes))
             most = f"{int(n.max())}"
         cells = []
-        for a, b in windows[2:4] + windows[-1:]:
+        for a, b in outcome_windows:
             o = r.get("option_outcomes")
             if o is None:
                 cells.append("-")
