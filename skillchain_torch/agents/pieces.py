@@ -48,15 +48,20 @@ __all__ = ["INITIATIONS", "OPTION_HEADS", "TOP_HEADS", "assemble_bank", "registe
 VALUE_SCALE = 1000.0  # Q / 1000: outputs and TD errors of order 10 (Pinball's goal: 10^4)
 
 
+def _first(seed) -> int:
+    """Agent 0's seed (an int, or the first of per-agent seeds): seeds a learner's sampling."""
+    return int(seed.reshape(-1)[0]) if isinstance(seed, torch.Tensor) else int(seed)
+
+
 def _mlp_top(population: int, obs_dim: int, num_decisions: int, gamma: float, seed: int,
              device) -> dict[str, Any]:  # fmt: skip
     head = MLPQHead(obs_dim, num_decisions, population, hidden=64, layers=2,
                     value_scale=VALUE_SCALE, seed=seed, device=device)  # fmt: skip
     loss = SMDPSarsaLoss(head, gamma, loss_function="smooth_l1", value_scale=VALUE_SCALE,
                          delay_value=True)  # fmt: skip
-    first = int(seed.reshape(-1)[0]) if isinstance(seed, torch.Tensor) else int(seed)
-    learner = ReplayTD(loss, torch.optim.Adam(head.parameters(), lr=1e-3), capacity=50_000,
-                       batch_size=32, target_update=250, train_every=4, seed=first)  # fmt: skip
+    optimizer = torch.optim.Adam(head.parameters(), lr=1e-3)
+    learner = ReplayTD(loss, optimizer, capacity=50_000, batch_size=32, target_update=250,
+                       train_every=4, seed=_first(seed))  # fmt: skip
     return {"q_head": head, "features": nn.Identity(), "top_learner": learner}
 
 
@@ -65,9 +70,8 @@ def _mlp_option_head(population: int, slots: int, num_actions: int, obs_dim: int
     head = MLPOptionQHead(population, slots, hidden=32, layers=2, num_actions=num_actions,
                           lr=0.01, q_scale=VALUE_SCALE, seed=seed, device=device,
                           obs_dim=obs_dim)  # fmt: skip
-    first = int(seed.reshape(-1)[0]) if isinstance(seed, torch.Tensor) else int(seed)
     head.replay = OptionReplay(capacity=50_000, batch_size=32, train_every=4,
-                               target_update=250, seed=first + 1)  # fmt: skip
+                               target_update=250, seed=_first(seed) + 1)  # fmt: skip
     return head
 
 

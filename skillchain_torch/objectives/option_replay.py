@@ -35,9 +35,8 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDict
 from torch import Tensor
-from torchrl.data import LazyTensorStorage, ReplayBuffer
 
-from skillchain_torch.objectives.replay import store
+from skillchain_torch.objectives.replay import seeded_buffer, store
 
 __all__ = ["OptionReplay"]
 
@@ -61,10 +60,7 @@ class OptionReplay:
         self.batch_size, self.train_every = int(batch_size), int(train_every)
         self.warmup = self.batch_size if warmup is None else int(warmup)
         self.target_update = int(target_update)
-        self.generator = torch.Generator().manual_seed(int(seed))
-        storage = LazyTensorStorage(int(capacity))
-        self.buffer = ReplayBuffer(storage=storage, batch_size=self.batch_size,
-                                   generator=self.generator)  # fmt: skip
+        self.buffer, self.generator = seeded_buffer(capacity, self.batch_size, seed)
         self.stored = self.updates = 0
         self.target: list[tuple[Tensor, Tensor]] | None = None
         self._epochs = -1  # the heads' reset count at the last target copy

@@ -43,7 +43,17 @@ from torch import Tensor
 from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.objectives import HardUpdate, LossModule
 
-__all__ = ["ReplayTD", "store"]
+__all__ = ["ReplayTD", "seeded_buffer", "store"]
+
+
+def seeded_buffer(capacity: int, batch_size: int,
+                  seed: int) -> tuple[ReplayBuffer, torch.Generator]:  # fmt: skip
+    """A TorchRL replay buffer over a ``LazyTensorStorage`` sampled by a generator of its own
+    (seeded ``seed``), so the global RNG is never touched; ``(buffer, generator)``."""
+    generator = torch.Generator().manual_seed(int(seed))
+    buffer = ReplayBuffer(storage=LazyTensorStorage(int(capacity)), batch_size=int(batch_size),
+                          generator=generator)  # fmt: skip
+    return buffer, generator
 
 
 def store(buffer: ReplayBuffer, item: TensorDictBase) -> None:
@@ -87,10 +97,7 @@ class ReplayTD:
         self.loss, self.optimizer = loss, optimizer
         self.batch_size = int(batch_size)
         self.warmup = self.batch_size if warmup is None else int(warmup)
-        self.generator = torch.Generator().manual_seed(int(seed))
-        storage = LazyTensorStorage(int(capacity))
-        self.buffer = ReplayBuffer(storage=storage, batch_size=self.batch_size,
-                                   generator=self.generator)  # fmt: skip
+        self.buffer, self.generator = seeded_buffer(capacity, self.batch_size, seed)
         targets = any(name.startswith("target_") for name, _ in loss.named_children())
         self.updater = (HardUpdate(loss, value_network_update_interval=int(target_update))
                         if targets else None)  # fmt: skip

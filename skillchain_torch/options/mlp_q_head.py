@@ -16,6 +16,7 @@ import math
 import torch
 from torch import Tensor, nn
 from torch.func import stack_module_state
+from torch.nn import functional
 
 from skillchain_torch.options.q_head import _DTYPES, NUM_ACTIONS, OBS_DIM, OptionQHead, dtype_name
 from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask
@@ -167,11 +168,8 @@ class MLPOptionQHead(OptionQHead):
             index = act[..., None, None].expand(*act.shape, self.slots, 1)
             delta = goal - q.gather(-1, index)[..., 0]
             e = delta / self.q_scale
-            if self.loss_function == "smooth_l1":  # 0.5 e^2 inside [-1, 1], |e| - 0.5 outside
-                size = e.abs()
-                loss = torch.where(size <= 1.0, 0.5 * e * e, size - 0.5)
-            else:
-                loss = 0.5 * e * e
+            loss = (functional.smooth_l1_loss(e, torch.zeros_like(e), reduction="none")
+                    if self.loss_function == "smooth_l1" else 0.5 * e * e)  # fmt: skip
             # Each slot's loss reads only its own parameters: a masked-out slot's gradient is 0.
             flat = [t for pair in layers for t in pair]
             batch = max(1, weight[..., 0, 0].numel())  # the mean over replayed steps
