@@ -4,8 +4,9 @@ Written once per completed episode, never per step, so logging stays off the hot
 
 * ``agent_{p}/return`` and ``agent_{p}/length`` at step = episode number (1-based);
 * ``population/return_mean``, ``population/return_ci_low``, ``population/return_ci_high`` (mean
-  +- 1.96 sd / sqrt(n) over the agents, sample sd) and ``population/length_mean``, written when
-  the slowest agent completes that episode (every agent has then completed it);
+  +- t(n - 1) sd / sqrt(n) over the agents: Student's t, sample sd) and
+  ``population/length_mean``, written when the slowest agent completes that episode (every
+  agent has then completed it);
 * ``perf/agent_steps_per_second`` and ``perf/active_agents`` at the same moments;
 * the hyperparameters (``log_hparams``) and a text summary of the config at the start;
 * for agents with an option bank, the option statistics and initiation-set images of
@@ -27,21 +28,23 @@ from pathlib import Path
 import numpy as np
 from torchrl.record.loggers import TensorboardLogger
 
+from .plots import t95
 from .timed import TimedHook
 
 __all__ = ["TensorBoardHook", "population_interval", "experiment_name", "log_population_arrays"]
 
 
 def population_interval(values) -> tuple[float, float, float]:
-    """``(mean, low, high)``: mean +- 1.96 * sd / sqrt(n) (sample sd; 0 width when n == 1).
+    """``(mean, low, high)``: mean +- t(n - 1) * sd / sqrt(n), Student's 95% interval (sample
+    sd; 0 width when n == 1).
 
     Example:
         >>> population_interval([1.0, 2.0, 3.0])
-        (2.0, 0.868..., 3.131...)
+        (2.0, -0.484..., 4.484...)
     """
     x = np.asarray(values, dtype=np.float64)
     mean = float(x.mean())
-    half = 1.96 * float(x.std(ddof=1)) / math.sqrt(x.size) if x.size > 1 else 0.0
+    half = t95(x.size) * float(x.std(ddof=1)) / math.sqrt(x.size) if x.size > 1 else 0.0
     return mean, mean - half, mean + half
 
 

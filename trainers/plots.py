@@ -10,17 +10,28 @@ Example:
 
 from __future__ import annotations
 
+import functools
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["learning_curve", "plot_learning_curve", "save_learning_curve"]
+__all__ = ["learning_curve", "plot_learning_curve", "save_learning_curve", "t95"]
+
+
+@functools.cache
+def t95(n: int) -> float:
+    """Student's two-sided 95% quantile for the mean of ``n`` runs (``t(0.975, n - 1)``; 0 for
+    fewer than 2 runs, where no interval exists)."""
+    from .study.intervals import t_quantile  # (the study package imports nothing heavy)
+
+    return t_quantile(0.975, n - 1) if n > 1 else 0.0
 
 
 def learning_curve(returns) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-episode ``(mean, low, high)`` over runs of ``returns [runs, episodes]``: mean +-
-    1.96 sd / sqrt(n) with n the runs that completed the episode (NaN = not completed)."""
+    t(n - 1) sd / sqrt(n), Student's 95% interval with n the runs that completed the episode
+    (NaN = not completed); with 10 runs t is 2.262, 15% wider than the normal's 1.96."""
     r = np.asarray(returns, dtype=np.float64)
     if r.ndim != 2:
         raise ValueError(f"returns must be [runs, episodes], got shape {r.shape}")
@@ -29,7 +40,8 @@ def learning_curve(returns) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         warnings.simplefilter("ignore", RuntimeWarning)  # sd of a single run
         mean = np.nanmean(r, axis=0) if r.size else np.zeros(r.shape[1])
         sd = np.nanstd(r, axis=0, ddof=1) if r.shape[0] > 1 else np.zeros(r.shape[1])
-        half = np.where(n > 1, 1.96 * sd / np.sqrt(np.maximum(n, 1)), 0.0)
+        t = np.array([t95(k) for k in n.tolist()])
+        half = np.where(n > 1, t * sd / np.sqrt(np.maximum(n, 1)), 0.0)
     return mean, mean - half, mean + half
 
 

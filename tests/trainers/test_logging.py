@@ -67,7 +67,10 @@ def test_population_interval_and_curve():
     r = np.array([[1.0, 2.0], [3.0, np.nan]])
     m, lo, hi = learning_curve(r)
     assert m.tolist() == [2.0, 2.0] and lo[1] == hi[1] == 2.0
-    assert np.isclose(hi[0] - m[0], 1.96 * np.std([1.0, 3.0], ddof=1) / np.sqrt(2))
+    # Student's t(1) = 12.706, not the normal's 1.96: two runs give a wide interval
+    assert np.isclose(hi[0] - m[0], 12.7062047 * np.std([1.0, 3.0], ddof=1) / np.sqrt(2))
+    m, lo, hi = population_interval([1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0])
+    assert np.isclose(hi - m, 2.2621572 * np.std(np.arange(1, 11), ddof=1) / np.sqrt(10))
 
 
 def test_save_learning_curve(tmp_path):

@@ -47,8 +47,8 @@ def _save(fig, path, title: str, dpi: int) -> Path:
 
 
 def plot_curves(returns: dict, ax=None, title: str | None = None, smooth: int = 1):
-    """Each ``returns[name] [runs, episodes]`` as a mean curve with a 95% band (mean +- 1.96
-    sd / sqrt(runs)), optionally averaged over ``smooth`` episodes."""
+    """Each ``returns[name] [runs, episodes]`` as a mean curve with a 95% band (mean +- t sd /
+    sqrt(runs), Student's t), optionally averaged over ``smooth`` episodes."""
     from ..plots import learning_curve
 
     if ax is None:
