@@ -8,8 +8,9 @@ Issue 29 asks that one skill-chaining step, read top to bottom on the torch path
 ``pinball_simple_single``, seed 0) on the torch path everywhere (``native=False`` and
 :func:`~skillchain_torch.backends.select.same_bits_kernels` off) until options exist, then
 traces ``stepper.step`` + ``agent.observe`` for a few population steps with
-:func:`sys.setprofile` and prints every file of this repository that a Python call entered, in
-the order first entered, with its call count and its role in DESIGN.md's reader's path.
+:func:`sys.settrace` and prints every file of this repository that a Python call entered, in
+the order first entered, with its call count, its role in DESIGN.md's reader's path, and how
+many of its lines the step ran (what a reader must read, against what the file holds).
 
 Example (a few seconds)::
 
@@ -40,7 +41,7 @@ def role(rel: str) -> str:
     return next((name for prefix, name in ROLES if rel.startswith(prefix)), "other")
 
 
-def trace(steps: int, warmup: int) -> tuple[list[str], collections.Counter]:
+def trace(steps: int, warmup: int) -> tuple[list[str], collections.Counter, dict[str, set]]:
     from skillchain_torch.backends.select import same_bits_kernels
     from trainers.config import TrainConfig
     from trainers.population import PopulationTrainer
@@ -48,6 +49,12 @@ def trace(steps: int, warmup: int) -> tuple[list[str], collections.Counter]:
     root = f"{ROOT}/"
     order: list[str] = []
     calls: collections.Counter = collections.Counter()
+    lines: dict[str, set] = collections.defaultdict(set)  # the distinct lines a step executes
+
+    def local(frame, event, arg):
+        if event == "line":
+            lines[frame.f_code.co_filename[len(root):]].add(frame.f_lineno)
+        return local
 
     def profile(frame, event, arg):
         if event == "call":
@@ -57,6 +64,8 @@ def trace(steps: int, warmup: int) -> tuple[list[str], collections.Counter]:
                 if rel not in calls:
                     order.append(rel)
                 calls[rel] += 1
+                return local
+        return None
 
     with same_bits_kernels(False):
         config = TrainConfig(runs=2, episodes=30, map="pinball_simple_single", seed=0,
@@ -65,14 +74,14 @@ def trace(steps: int, warmup: int) -> tuple[list[str], collections.Counter]:
         trainer.train(max_agent_steps=warmup)
         action = trainer.agent.actions
         for _ in range(steps):
-            sys.setprofile(profile)
+            sys.settrace(profile)  # calls, and the lines of this repository's frames
             obs, reward, ends = trainer.stepper.step(action)
             if ends is None:
                 action = trainer.agent.observe(obs, reward)
-            sys.setprofile(None)
+            sys.settrace(None)
             if ends is not None:  # an episode ended: the step above is traced, stop there
                 break
-    return order, calls
+    return order, calls, lines
 
 
 def main(argv=None) -> None:
@@ -80,13 +89,16 @@ def main(argv=None) -> None:
     parser.add_argument("--steps", type=int, default=20, help="population steps traced")
     parser.add_argument("--warmup", type=int, default=60_000, help="agent steps trained first")
     args = parser.parse_args(argv)
-    order, calls = trace(args.steps, args.warmup)
-    print("| # | file | role | calls |\n|---:|---|---|---:|")
+    order, calls, lines = trace(args.steps, args.warmup)
+    print("| # | file | role | calls | lines run / in file |\n|---:|---|---|---:|---:|")
+    total = {rel: sum(1 for _ in open(ROOT / rel)) for rel in order}
     for i, rel in enumerate(order, 1):
-        print(f"| {i} | `{rel}` | {role(rel)} | {calls[rel]} |")
+        print(f"| {i} | `{rel}` | {role(rel)} | {calls[rel]} | {len(lines[rel])} / {total[rel]} |")
     by_role = collections.Counter(role(rel) for rel in order)
+    run = sum(len(lines[rel]) for rel in order)
     print(f"\n{len(order)} files entered (target: at most 8); by role: "
-          + ", ".join(f"{name} {n}" for name, n in sorted(by_role.items())))
+          + ", ".join(f"{name} {n}" for name, n in sorted(by_role.items()))
+          + f"; {run:,} distinct lines run, in files of {sum(total.values()):,} lines")
 
 
 if __name__ == "__main__":

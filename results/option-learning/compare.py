@@ -1,5 +1,6 @@
 """Issue 30's option-learning study: each variant's returns against flat Sarsa's, per window of
-episodes, with 95% Welch intervals (Student's t quantile), options held, and how executions end.
+episodes, with 95% Welch intervals (Student's t quantile), each against the default (``frozen``)
+paired by seed, options held, and how executions end.
 
     python results/option-learning/compare.py screen     # seeds 0-19 (screening only)
     python results/option-learning/compare.py confirm    # seeds 1000+ (the evidence)
@@ -59,6 +60,20 @@ def tables(runs: dict) -> list[str]:
                 star = "**" if abs(d) > h else ""
                 cells.append(f"{star}{fmt(d, h)}{star}")
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    base = runs.get("frozen")
+    if base is not None:  # run i has seed first + i in every variant: paired by agent
+        lines += ["", "## Variant - frozen (the default), paired by seed (95% t interval)", "",
+                  "| variant | runs | " + " | ".join(f"{a}-{b}" for a, b in windows) + " |",
+                  "|---|---|" + "---|" * len(windows)]  # fmt: skip
+        for name in (n for n in names if n != "frozen"):
+            x = runs[name]["returns"]
+            n = min(len(x), len(base["returns"]))
+            cells = []
+            for a, b in windows:
+                d, h = mean_ci(x[:n, a - 1:b].mean(1) - base["returns"][:n, a - 1:b].mean(1))
+                star = "**" if abs(d) > h else ""
+                cells.append(f"{star}{fmt(d, h)}{star}")
+            lines.append(f"| {name} | {n} | " + " | ".join(cells) + " |")
     outcome_windows = list(dict.fromkeys(windows[2:4] + windows[-1:]))  # (each once)
     lines += ["", "## Options held, and how executions ended (all runs' executions in the "
               "window)", "", f"| variant | options at 25 / 50 / {episodes} | max options | "
