@@ -7,7 +7,8 @@ paired by seed, options held, and how executions end.
     python results/option-learning/compare.py screen-hard   # any folder of variants
 
 Reads ``<block>/<variant>/{returns,n_options,option_outcomes}.npy`` (``flat`` is the baseline)
-and writes ``<block>/tables.md`` and ``<block>/curves.png``.
+and writes ``<block>/tables.md``, ``<block>/curves.png`` and, with the default's ``frozen`` in the
+block, ``<block>/against_default.png`` (each variant minus the default per window, paired).
 """
 
 from __future__ import annotations
@@ -107,6 +108,7 @@ def figure(runs: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8, 4.5))
+    ax.set_prop_cycle(color=plt.cm.tab20(np.linspace(0, 1, 20))[: max(len(runs), 1)])
     for name, r in runs.items():
         x = r["returns"]
         kernel = np.ones(10) / 10  # a 10-episode moving average, per run
@@ -124,12 +126,45 @@ def figure(runs: dict, path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
+def paired_figure(runs: dict, path: Path, base: str = "frozen") -> None:
+    """Each variant minus ``base`` per window, paired by seed, with its 95% t interval: where
+    a variant gains or loses against the default, in one glance."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    episodes = min(r["returns"].shape[1] for r in runs.values())
+    windows = [(a, b) for a, b in WINDOWS if b <= episodes]
+    names = [n for n in runs if n != base]
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    width = 0.8 / max(len(names), 1)
+    colors = plt.cm.tab20(np.linspace(0, 1, 20))
+    for i, name in enumerate(names):
+        x, y = runs[name]["returns"], runs[base]["returns"]
+        n = min(len(x), len(y))
+        cis = [mean_ci(x[:n, a - 1:b].mean(1) - y[:n, a - 1:b].mean(1)) for a, b in windows]
+        pos = np.arange(len(windows)) - 0.4 + (i + 0.5) * width
+        ax.errorbar(pos, [m for m, _ in cis], yerr=[h for _, h in cis], fmt="o", ms=3,
+                    capsize=2, color=colors[i % 20], label=f"{name} ({n} runs)")
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_xticks(range(len(windows)), [f"{a}-{b}" for a, b in windows])
+    ax.set_xlabel("episodes")
+    ax.set_ylabel(f"return - {base} (paired by seed, 95% t)")
+    ax.legend(fontsize=7, ncol=2)
+    ax.grid(alpha=0.3, axis="y")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
 def main() -> None:
     block = HERE / (sys.argv[1] if len(sys.argv) > 1 else "screen")
     runs = load(block)
     lines = [f"# {block.name}: each variant against flat", "", *tables(runs), ""]
     (block / "tables.md").write_text("\n".join(lines))
     figure(runs, block / "curves.png")
+    if "frozen" in runs:
+        paired_figure(runs, block / "against_default.png")
     print("\n".join(lines))
 
 
