@@ -76,8 +76,9 @@ def tables(runs: dict) -> list[str]:
                 cells.append(f"{star}{fmt(d, h)}{star}")
             lines.append(f"| {name} | {n} | " + " | ".join(cells) + " |")
     outcome_windows = list(dict.fromkeys(windows[2:4] + windows[-1:]))  # (each once)
+    at = [e for e in dict.fromkeys((25, 50, episodes)) if e <= episodes]  # (short runs too)
     lines += ["", "## Options held, and how executions ended (all runs' executions in the "
-              "window)", "", f"| variant | options at 25 / 50 / {episodes} | max options | "
+              "window)", "", f"| variant | options at {' / '.join(map(str, at))} | max options | "
               + " | ".join(f"success / timeout {a}-{b}" for a, b in outcome_windows)
               + " |", "|---|---|---|" + "---|" * len(outcome_windows)]  # fmt: skip
     for name in names:
@@ -85,7 +86,7 @@ def tables(runs: dict) -> list[str]:
         n = r.get("n_options")
         held, most = "-", "-"
         if n is not None:
-            held = " / ".join(f"{n[:, e - 1].mean():.1f}" for e in (25, 50, episodes))
+            held = " / ".join(f"{n[:, e - 1].mean():.1f}" for e in at)
             most = f"{int(n.max())}"
         cells = []
         for a, b in outcome_windows:
