@@ -48,7 +48,8 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = ["Preset", "PAPER", "DEFAULT", "PRESETS", "PRESET_NAMES", "PRESET_FIELDS",
-           "preset_named", "differences", "instance_defaults", "env_order", "env_alpha"]
+           "preset_named", "differences", "instance_defaults", "env_order", "env_alpha",
+           "env_option_alpha"]
 
 
 def env_order(dim: int) -> int:
@@ -63,6 +64,21 @@ def env_alpha(order: int, dim: int) -> float:
     moves a value about as far as on Pinball (a Fourier vector's squared norm is about half
     its length): 0.025 on MountainCar at order 4, 0.00015 on Acrobot at order 3."""
     return 0.001 * 625 / (order + 1) ** dim
+
+
+def env_option_alpha(preset: Preset, dim: int) -> float:
+    """The options' default step size off Pinball, by :func:`env_alpha`'s rule: the preset's
+    ``option_alpha`` (stated for Pinball's 4 dims: ``(option_order + 1) ** 4`` features, 256 at
+    the paper's order 3) times ``(option_order + 1) ** (4 - dim)``, so that an update moves an
+    option's value as far as on Pinball. Unscaled, the paper's 0.0005 on LunarLander's 8 dims
+    (65,536 features) diverged in 15 episodes (``results/neural/README.md``).
+
+    Example:
+        >>> env_option_alpha(PAPER, 4), env_option_alpha(PAPER, 8), env_option_alpha(PAPER, 2)
+        (0.0005, 1.953125e-06, 0.008)
+    """
+    o = preset.option_order + 1
+    return preset.option_alpha * o**4 / o**dim
 
 
 def instance_defaults(map_name: str | None) -> tuple[int, float]:

@@ -3,11 +3,10 @@
 The learning values come from a named preset (:mod:`skillchain_torch.presets`; ``preset``,
 ``"default"`` or ``"paper"``): every field the preset sets and the config leaves ``None`` takes
 the preset's value when the config is made, and a value given explicitly wins. Both presets
-take the top level from the paper's section 5.1: Sarsa with gamma = 1 and epsilon = 0.01 over a
-Fourier basis of order 4 with alpha = 0.001 on the first Pinball instance (simple maps) and of
-order 5 with alpha = 0.0005 on the second (maps whose name contains ``"hard"``). ``None`` for
-``order`` or ``alpha`` means "the paper's value for this map"; :meth:`TrainConfig.resolved`
-fills them in.
+take the top level from the paper's section 5.1: Sarsa (gamma = 1, epsilon = 0.01) over a
+Fourier basis of order 4, alpha = 0.001, on the first instance (simple maps), order 5, alpha =
+0.0005, on the second (maps named ``"hard"``). ``order`` and ``alpha`` left ``None`` (and off
+Pinball ``option_alpha``) are filled per environment by :meth:`TrainConfig.resolved`.
 
 Example:
     >>> cfg = TrainConfig(map="pinball_hard_single", runs=4, episodes=10).resolved()
@@ -38,6 +37,7 @@ from skillchain_torch.discovery.readings import InitiationReading
 from skillchain_torch.presets import (
     PRESET_FIELDS,
     env_alpha,
+    env_option_alpha,
     env_order,
     instance_defaults,
     preset_named,
@@ -119,7 +119,9 @@ class TrainConfig:
             option's own scale; see :class:`~skillchain_torch.discovery.
             SkillChaining`).
         option_alpha: (preset) the options' Q-learning step size (paper: ``alpha_o =
-            0.0005``); given options keep the step size of the run that discovered them.
+            0.0005``; off Pinball scaled to the env's option basis unless given, see
+            :func:`~skillchain_torch.presets.env_option_alpha`); given options keep the step
+            size of the run that discovered them.
         completion_reward: (preset) ``C``, added to an option's reward when its target fires
             (the paper does not give it; 10,000 is the task's goal reward).
         value_start, value_bonus: (preset) how ``Q(s, o)`` starts when an option joins (see
@@ -197,8 +199,11 @@ class TrainConfig:
         except ValueError as err:
             raise ConfigError(str(err), ("preset",)) from None
         for name in PRESET_CONFIG_FIELDS:
-            if getattr(self, name) is None:
+            if getattr(self, name) is None and not self._per_env(name):
                 object.__setattr__(self, name, getattr(preset, name))
+
+    def _per_env(self, name: str) -> bool:  # left None until resolved() knows the env's size
+        return name == "option_alpha" and self.env is not None
 
     @property
     def env_name(self) -> str:
@@ -215,13 +220,17 @@ class TrainConfig:
         """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``; off
         Pinball, :func:`env_order` and :func:`env_alpha`)."""
         order, alpha = paper_defaults(self.map)
+        option_alpha = self.option_alpha
         if self.env is not None:
             order = env_order(self.obs_dim or 4) if self.order is None else int(self.order)
             alpha = env_alpha(order, self.obs_dim or 4)
+            if option_alpha is None:  # the preset's, scaled to the env's option basis
+                option_alpha = env_option_alpha(preset_named(self.preset), self.obs_dim or 4)
         return dataclasses.replace(
             self,
             order=order if self.order is None else int(self.order),
             alpha=alpha if self.alpha is None else float(self.alpha),
+            option_alpha=option_alpha,
         )
 
     def validate(self, memory: bool = True) -> TrainConfig:
@@ -242,7 +251,8 @@ class TrainConfig:
         preset = preset_named(self.preset)
         for field in dataclasses.fields(self):
             value, kind = getattr(self, field.name), str(field.type)
-            if field.name in PRESET_CONFIG_FIELDS and getattr(preset, field.name) is not None:
+            if (field.name in PRESET_CONFIG_FIELDS and getattr(preset, field.name) is not None
+                    and not (value is None and self._per_env(field.name))):  # fmt: skip
                 kind = kind.replace(" | None", "")  # None was the preset's value, filled in
             what = type_problem(kind, value)
             if what is not None:
@@ -271,8 +281,8 @@ class TrainConfig:
             ("convergence_threshold", self.convergence_threshold,
              math.isfinite(self.convergence_threshold) and self.convergence_threshold > 0,
              "finite and > 0"),
-            ("option_alpha", self.option_alpha,
-             math.isfinite(self.option_alpha) and self.option_alpha >= 0, ">= 0 and finite"),
+            ("option_alpha", self.option_alpha, self.option_alpha is None  # (resolved later)
+             or (math.isfinite(self.option_alpha) and self.option_alpha >= 0), ">= 0 and finite"),
             ("completion_reward", self.completion_reward,
              math.isfinite(self.completion_reward), "finite"),
             ("value_start", repr(self.value_start), self.value_start in VALUE_STARTS,

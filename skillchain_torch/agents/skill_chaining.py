@@ -50,7 +50,13 @@ from skillchain_torch.discovery import (
 from skillchain_torch.discovery.readings import FIRST_READING
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
-from skillchain_torch.presets import PRESET_FIELDS, Preset, instance_defaults, preset_named
+from skillchain_torch.presets import (
+    PRESET_FIELDS,
+    Preset,
+    env_option_alpha,
+    instance_defaults,
+    preset_named,
+)
 
 from .hierarchical import MAX_OPTION_STEPS, HierarchicalAgent, as_bool
 
@@ -160,6 +166,8 @@ class SkillChainingAgent(HierarchicalAgent):
         # The env's sizes (its specs; None: Pinball's 4 and 5).
         sizes = {k: v for k in ("obs_dim", "num_actions") if (v := kwargs.pop(k, None)) is not None}
         p = preset_named(preset).replace(**fields)
+        if "obs_dim" in sizes and "option_alpha" not in fields:  # off Pinball: the env's basis
+            p = p.replace(option_alpha=env_option_alpha(p, sizes["obs_dim"]))
         order, alpha = instance_defaults(map)
         bank = OptionBank.build(population, p.slots, order=p.option_order, alpha=p.option_alpha,
                                 seed=seed, device=device, degree=p.degree, lr=p.lr,

@@ -42,6 +42,30 @@ def test_agents_run_on_mountain_car_with_sizes_from_the_specs(agent):
         assert trainer.agent.bank.obs_dim == 2 and trainer.agent.num_decisions == 3 + 12
 
 
+def test_option_step_size_follows_the_envs_option_basis():
+    """The paper's alpha_o is stated for Pinball's 4-d order-3 option basis (256 features); off
+    Pinball a preset's value is scaled to the env's basis, as alpha is, and a given one is kept
+    (unscaled, the paper's 0.0005 diverged on LunarLander's 65,536 option features)."""
+    from skillchain_torch.agents import SkillChainingAgent
+
+    lander = dict(agent="skill-chaining", preset="paper", env="gymnasium:LunarLander-v3",
+                  obs_dim=8, num_actions=4)  # fmt: skip
+    assert TrainConfig(**lander).option_alpha is None  # left to resolved(), as alpha is
+    assert TrainConfig(**lander).validate(memory=False).resolved().option_alpha == 0.0005 / 256
+    car = dict(agent="skill-chaining", preset="paper", env=MOUNTAIN_CAR, obs_dim=2, num_actions=3)
+    assert TrainConfig(**car).resolved().option_alpha == 0.0005 * 16  # 16 features, not 256
+    assert TrainConfig(**car, option_alpha=0.01).resolved().option_alpha == 0.01  # given: kept
+    assert TrainConfig(agent="skill-chaining", preset="paper").resolved().option_alpha == 0.0005
+    assert TrainConfig(**{**car, "preset": "default"}).resolved().option_alpha == 0.0  # frozen
+    saved = {**TrainConfig(**car).resolved().to_dict(), "option_alpha": 0.0005}
+    assert TrainConfig.from_dict(saved).resolved().option_alpha == 0.0005  # a saved run: as run
+    built = SkillChainingAgent.build(2, preset="paper", obs_dim=8, num_actions=4, order=1)
+    assert built.bank.q_head.config["alpha"] == 0.0005 / 256  # the Python API agrees
+    built = SkillChainingAgent.build(2, preset="paper", obs_dim=8, num_actions=4, order=1,
+                                     option_alpha=0.1)  # fmt: skip
+    assert built.bank.q_head.config["alpha"] == 0.1
+
+
 def test_given_options_run_on_mountain_car(tmp_path):
     sc = TrainConfig(agent="skill-chaining", env=MOUNTAIN_CAR, runs=1, episodes=1, seed=0,
                      max_episode_steps=20)  # fmt: skip
