@@ -49,7 +49,7 @@ from typing import Any
 
 __all__ = ["Preset", "PAPER", "DEFAULT", "PRESETS", "PRESET_NAMES", "PRESET_FIELDS",
            "preset_named", "differences", "instance_defaults", "env_order", "env_alpha",
-           "env_option_alpha"]
+           "env_option_alpha", "env_values"]
 
 
 def env_order(dim: int) -> int:
@@ -79,6 +79,19 @@ def env_option_alpha(preset: Preset, dim: int) -> float:
     """
     o = preset.option_order + 1
     return preset.option_alpha * o**4 / o**dim
+
+
+def env_values(preset: Preset, dim: int, order: int | None = None) -> tuple[int, float, float]:
+    """Off Pinball, from the env's observation size: ``(order, alpha, option_alpha)``, the top
+    level's order (``order`` if given) and step size and the options' step size. The one rule
+    ``TrainConfig.resolved`` and ``SkillChainingAgent.build`` both apply.
+
+    Example:
+        >>> env_values(PAPER, 2)  # MountainCar
+        (4, 0.025, 0.008)
+    """
+    order = env_order(dim) if order is None else int(order)
+    return order, env_alpha(order, dim), env_option_alpha(preset, dim)
 
 
 def instance_defaults(map_name: str | None) -> tuple[int, float]:

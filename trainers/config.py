@@ -36,9 +36,7 @@ from typing import Any
 from skillchain_torch.discovery.readings import InitiationReading
 from skillchain_torch.presets import (
     PRESET_FIELDS,
-    env_alpha,
-    env_option_alpha,
-    env_order,
+    env_values,
     instance_defaults,
     preset_named,
 )
@@ -218,14 +216,13 @@ class TrainConfig:
 
     def resolved(self) -> TrainConfig:
         """A copy with ``order`` and ``alpha`` set (the paper's values where ``None``; off
-        Pinball, :func:`env_order` and :func:`env_alpha`)."""
+        Pinball, :func:`~skillchain_torch.presets.env_values`, with ``option_alpha``)."""
         order, alpha = paper_defaults(self.map)
         option_alpha = self.option_alpha
-        if self.env is not None:
-            order = env_order(self.obs_dim or 4) if self.order is None else int(self.order)
-            alpha = env_alpha(order, self.obs_dim or 4)
-            if option_alpha is None:  # the preset's, scaled to the env's option basis
-                option_alpha = env_option_alpha(preset_named(self.preset), self.obs_dim or 4)
+        if self.env is not None:  # from the env's size; an option_alpha given is kept
+            order, alpha, scaled = env_values(preset_named(self.preset), self.obs_dim or 4,
+                                              self.order)  # fmt: skip
+            option_alpha = scaled if option_alpha is None else option_alpha
         return dataclasses.replace(
             self,
             order=order if self.order is None else int(self.order),

@@ -53,7 +53,7 @@ from skillchain_torch.options import GoalEvent, OptionBank, TerminationPredicate
 from skillchain_torch.presets import (
     PRESET_FIELDS,
     Preset,
-    env_option_alpha,
+    env_values,
     instance_defaults,
     preset_named,
 )
@@ -166,9 +166,11 @@ class SkillChainingAgent(HierarchicalAgent):
         # The env's sizes (its specs; None: Pinball's 4 and 5).
         sizes = {k: v for k in ("obs_dim", "num_actions") if (v := kwargs.pop(k, None)) is not None}
         p = preset_named(preset).replace(**fields)
-        if "obs_dim" in sizes and "option_alpha" not in fields:  # off Pinball: the env's basis
-            p = p.replace(option_alpha=env_option_alpha(p, sizes["obs_dim"]))
         order, alpha = instance_defaults(map)
+        if "obs_dim" in sizes:  # off Pinball: from the env's size, as TrainConfig.resolved
+            order, alpha, scaled = env_values(p, sizes["obs_dim"], p.order)
+            if "option_alpha" not in fields:
+                p = p.replace(option_alpha=scaled)
         bank = OptionBank.build(population, p.slots, order=p.option_order, alpha=p.option_alpha,
                                 seed=seed, device=device, degree=p.degree, lr=p.lr,
                                 sweeps=p.sweeps, capacity=p.capacity, distance=p.distance,

@@ -64,6 +64,10 @@ def test_option_step_size_follows_the_envs_option_basis():
     built = SkillChainingAgent.build(2, preset="paper", obs_dim=8, num_actions=4, order=1,
                                      option_alpha=0.1)  # fmt: skip
     assert built.bank.q_head.config["alpha"] == 0.1
+    built = SkillChainingAgent.build(2, preset="paper", obs_dim=2, num_actions=3)
+    via_config = TrainConfig(**car).resolved()  # the two entry points apply one rule
+    assert (built.order, built.update.alpha) == (via_config.order, via_config.alpha) == (4, 0.025)
+    assert built.bank.q_head.config["alpha"] == via_config.option_alpha
 
 
 def test_given_options_run_on_mountain_car(tmp_path):
