@@ -122,6 +122,7 @@ class Preset:
     failure_bootstrap: str
     completion_reward: float
     intra_option_primitives: bool
+    intra_option_target: str
     option_interruption: bool
     # options: Q-learning over a Fourier basis
     option_order: int
@@ -178,6 +179,7 @@ PAPER = Preset(
     failure_bootstrap="decision",  # 5.1: Sarsa's target bootstraps on the next decision
     completion_reward=10_000.0,  # silent on the options' completion reward: library default
     intra_option_primitives=False,  # 5.1: the top level learns by SMDP Sarsa alone
+    intra_option_target="decisions",  # (used only with intra_option_primitives)
     option_interruption=False,  # 3: an option runs until its termination condition holds
     option_order=3,  # 5.1: options' 3rd-order Fourier basis
     option_alpha=0.0005,  # 5.1: Q-learning, alpha_o = 0.0005

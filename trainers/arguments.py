@@ -28,8 +28,8 @@ CONFIG_OPTIONS = (
     "scale_step_size", "max_episode_steps", "checkpoint_every", "options", "options_agent",
     "slots", "initiation_bias", "initiation_centered", "gestation_positives",
     "initiation_start", "initiation_constrain", "one_class_fits", "failure_bootstrap",
-    "keep_negatives", "intra_option_primitives", "option_interruption", "policy_start",
-    "value_start", "value_bonus", "option_alpha", "completion_reward", "gestation",
+    "keep_negatives", "intra_option_primitives", "intra_option_target", "option_interruption",
+    "policy_start", "value_start", "value_bonus", "option_alpha", "completion_reward", "gestation",
     "convergence_threshold", "top_head", "option_head", "initiation", "max_branching",
 )  # fmt: skip
 
@@ -181,6 +181,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="the top level's primitive values also learn from the steps options take "
         "(one-step Q-learning; default off: only from the agent's own primitive decisions, "
         "as the paper's SMDP Sarsa)",
+    )
+    train.add_argument(
+        "--intra-option-target",
+        choices=("decisions", "primitives"),
+        default=None,
+        help="with --intra-option-primitives on: what those steps bootstrap on at s', the best "
+        "decision (options included) or the best primitive" + _presets("intra_option_target"),
     )
     train.add_argument(
         "--option-interruption",

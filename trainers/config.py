@@ -104,7 +104,7 @@ class TrainConfig:
             the initiation-set reading of skill chaining (see
             :class:`~skillchain_torch.discovery.InitiationReading`; default preset
             ``pos20-fitted-cstart``, ``results/screening/README.md``).
-        failure_bootstrap, intra_option_primitives: (preset) see
+        failure_bootstrap, intra_option_primitives, intra_option_target: (preset) see
             :class:`~skillchain_torch.agents.HierarchicalAgent`'s arguments of those names.
         option_interruption: (preset) ``interruption`` of
             :class:`~skillchain_torch.agents.HierarchicalAgent`.
@@ -172,6 +172,7 @@ class TrainConfig:
     failure_bootstrap: str | None = None
     keep_negatives: bool | None = None
     intra_option_primitives: bool | None = None
+    intra_option_target: str | None = None
     option_interruption: bool | None = None
     policy_start: str | None = None
     option_alpha: float | None = None

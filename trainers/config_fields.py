@@ -14,7 +14,8 @@ LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_neg
                  "policy_start": "zero", "value_start": "max-sample", "value_bonus": 0.0,
                  "option_alpha": 0.0005,
                  "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15,
-                 "intra_option_primitives": False, "option_interruption": False,
+                 "intra_option_primitives": False, "intra_option_target": "decisions",
+                 "option_interruption": False,
                  "top_head": "fourier", "option_head": "fourier", "initiation": "logistic",
                  "max_branching": 3}
 
@@ -35,6 +36,7 @@ _PIECES = ("top_head", "option_head", "initiation")
 UNREAD_FIELDS = {
     "flat": _DISCOVERY_FIELDS + _PIECES + ("options", "options_agent", "failure_bootstrap",
                                            "completion_reward", "intra_option_primitives",
+                                           "intra_option_target",
                                            "option_interruption"),
     "given-options": _DISCOVERY_FIELDS + _PIECES,
     "skill-chaining": ("options", "options_agent"),

@@ -115,6 +115,7 @@ class GivenOptionsAgent(HierarchicalAgent):
                          scale_step_size=cfg.scale_step_size, device=device,
                          failure_bootstrap=cfg.failure_bootstrap,
                          intra_option_primitives=cfg.intra_option_primitives,
+                         intra_option_target=cfg.intra_option_target,
                          interruption=cfg.option_interruption,
                          overlap=True,  # as the options were learned (no-op if unrelated)
                          completion_reward=cfg.completion_reward, native=native)

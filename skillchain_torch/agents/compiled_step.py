@@ -38,6 +38,7 @@ class CompiledStep:
             completion_reward=float(self.option_update.completion_reward),
             failure_bootstrap_primitives=self.failure_bootstrap == "primitives",
             intra_option_primitives=self.intra_option_primitives,
+            intra_option_primitive_target=self.intra_option_target == "primitives",
             interruption=self.interruption)  # fmt: skip
 
     def _encode_next(self, next_obs: Tensor) -> tuple[Tensor, Tensor | None, Tensor | None]:

@@ -71,12 +71,13 @@ from skillchain_torch.options import (
 from skillchain_torch.rng import CounterRNG
 
 __all__ = ["HierarchicalAgent", "shared_fourier_columns", "NUM_PRIMITIVES", "MAX_OPTION_STEPS",
-           "UNIFORMS_PER_STEP", "FAILURE_BOOTSTRAPS"]
+           "UNIFORMS_PER_STEP", "FAILURE_BOOTSTRAPS", "INTRA_OPTION_TARGETS"]
 
 NUM_PRIMITIVES = 5
 OBS_DIM = 4
 MAX_OPTION_STEPS = 250
 FAILURE_BOOTSTRAPS = ("decision", "primitives")
+INTRA_OPTION_TARGETS = ("decisions", "primitives")
 UNIFORMS_PER_STEP = 4  # top-level (explore, pick), option (explore, pick)
 AGENT_STREAM = 0
 
@@ -114,6 +115,10 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         intra_option_primitives: each step ``(s, a, r, s')`` inside an option also moves the
             top-level ``Q(s, a)`` toward ``r + gamma max_d Q(s', d)`` (intra-option value
             learning, Sutton, Precup & Singh 1999, section 7). Off (the paper's SMDP Sarsa).
+        intra_option_target: what those steps bootstrap on: ``"decisions"`` (``max_d`` over
+            every available decision, options included) or ``"primitives"`` (``max_a Q(s', a)``
+            over the primitives only, so an option's optimistic value is never copied into
+            the primitives' values along its route).
         interruption: an executing option stops at ``s'`` where ``Q(s', o) < max_d Q(s', d)``
             (Sutton, Precup & Singh 1999, section 5); neither a success nor a failure. Off
             (the paper: options run until their target fires or they time out).
@@ -153,6 +158,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         overlap: bool = False,
         failure_bootstrap: str = "decision",
         intra_option_primitives: bool = False,
+        intra_option_target: str = "decisions",
         interruption: bool = False,
         q_head: nn.Module | None = None,
         features: nn.Module | None = None,
@@ -166,7 +172,11 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
             raise ValueError(f"failure_bootstrap must be one of {', '.join(FAILURE_BOOTSTRAPS)}"
                              f", got {failure_bootstrap!r}")  # fmt: skip
         self.failure_bootstrap = failure_bootstrap
+        if intra_option_target not in INTRA_OPTION_TARGETS:
+            raise ValueError(f"intra_option_target must be one of "
+                             f"{', '.join(INTRA_OPTION_TARGETS)}, got {intra_option_target!r}")
         self.intra_option_primitives = bool(intra_option_primitives)
+        self.intra_option_target = intra_option_target
         self.interruption = bool(interruption)
         device = torch.device(bank.status.device if device is None else device)
         self.bank = bank.to(device)
@@ -352,25 +362,14 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         phi_next, d_next = self._choose(next_obs, phi_next, contains_next, u[:, :2],
                                         rows=decision_ended | inside if values_inside
                                         else decision_ended)  # fmt: skip
-        if values_inside:  # max_d Q(s', d)
-            best = self.last_q.masked_fill(~self.last_available, -torch.inf).max(1).values
         if self.interruption:  # the option stops where it is no longer greedy
-            in_force = self.decision[:, None]
-            q_o = self.last_q.gather(1, in_force)[:, 0]  # valued above where available at s'
-            gone = (inside & ~self.last_available.gather(1, in_force)[:, 0]).nonzero()[:, 0]
-            if gone.numel() > 0:  # s' left the option's set: value it there
-                q_o = q_o.index_put((gone,), self.q_head.q_value(phi_next, self.decision, gone))
-            decision_ended = decision_ended | (inside & ~decision_ended & (q_o < best))
+            decision_ended = decision_ended | self._interrupted(inside & ~decision_ended, phi_next)
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
         q_next = self.last_q.gather(1, d_next[:, None])[:, 0]
         if self.failure_bootstrap == "primitives":  # a timeout: the best primitive at s'
-            timed_out = option_stops & ~hit
-            best_primitive = self.last_q[:, :self.num_primitives].max(1).values
-            q_next = torch.where(timed_out, best_primitive, q_next)
+            q_next = torch.where(option_stops & ~hit, self._best_primitive(), q_next)
         if self.intra_option_primitives:  # the option's primitive, one Q-learning step at s
-            self.learn(self.state_phi, self.action, reward, torch.ones_like(self.duration),
-                       best, terminated, inside)
-            self.state_phi = torch.where(stepped[:, None], phi_next, self.state_phi)
+            self._learn_inside(reward, terminated, inside, stepped, phi_next)
         smdp_delta = self.learn(self.decision_phi, self.decision, self.decision_return,
                                 self.duration.clamp(min=1), q_next, terminated, decision_ended,
                                 next_phi=phi_next, next_decision=d_next,
@@ -396,5 +395,6 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
                 f"gamma={self.gamma}, max_option_steps={self.max_option_steps}, "
                 f"failure_bootstrap={self.failure_bootstrap}, "
                 f"intra_option_primitives={self.intra_option_primitives}, "
+                f"intra_option_target={self.intra_option_target}, "
                 f"interruption={self.interruption}, "
                 f"active={int(self._index.numel())}, native={self.native}")

@@ -1,5 +1,6 @@
 """The options inside the hierarchical agent: which initiation sets hold a state, which
-targets fired, and the executing option's action (paper sections 2 and 4).
+targets fired, the executing option's action (paper sections 2 and 4), and the readings of
+an execution the paper leaves open (interruption, what the primitives learn inside options).
 
 A mixin of :class:`~skillchain_torch.agents.HierarchicalAgent` (it reads ``bank``, ``events``,
 the no-overlap ``_exclusion`` and the per-step state); skill chaining overrides :meth:`narrow`
@@ -58,6 +59,36 @@ class OptionExecution:
                              f"given")  # fmt: skip
         return target_indicator(bank, evaluate_base_events(self.events, next_obs, terminated),
                                 raw)  # fmt: skip
+
+    def _best_decision(self) -> Tensor:
+        """``[P]``: ``max_d Q(s', d)`` over the decisions available at ``s'`` (``last_q``)."""
+        return self.last_q.masked_fill(~self.last_available, -torch.inf).max(1).values
+
+    def _best_primitive(self) -> Tensor:
+        """``[P]``: ``max_a Q(s', a)`` over the primitives at ``s'`` (``last_q``)."""
+        return self.last_q[:, :self.num_primitives].max(1).values
+
+    def _interrupted(self, going_on: Tensor, phi_next: Tensor) -> Tensor:
+        """``[P]``: the executions in ``going_on`` that stop at ``s'`` because the option in
+        force is no longer the greedy decision there (``Q(s', o) < max_d Q(s', d)``;
+        ``interruption``, Sutton, Precup & Singh 1999, section 5)."""
+        in_force = self.decision[:, None]
+        q_o = self.last_q.gather(1, in_force)[:, 0]  # valued where available at s'
+        gone = (going_on & ~self.last_available.gather(1, in_force)[:, 0]).nonzero()[:, 0]
+        if gone.numel() > 0:  # s' left the option's set: value it there
+            q_o = q_o.index_put((gone,), self.q_head.q_value(phi_next, self.decision, gone))
+        return going_on & (q_o < self._best_decision())
+
+    def _learn_inside(self, reward: Tensor, terminated: Tensor, inside: Tensor,
+                      stepped: Tensor, phi_next: Tensor) -> None:  # fmt: skip
+        """``intra_option_primitives``: the primitive an option took at ``s`` moves toward
+        ``r + max Q(s', .)`` (one Q-learning step; over every available decision, or the
+        primitives only with ``intra_option_target="primitives"``); ``state_phi`` moves on."""
+        best = (self._best_primitive() if self.intra_option_target == "primitives"
+                else self._best_decision())  # fmt: skip
+        self.learn(self.state_phi, self.action, reward, torch.ones_like(self.duration), best,
+                   terminated, inside)
+        self.state_phi = torch.where(stepped[:, None], phi_next, self.state_phi)
 
     def _act(self, rows: Tensor, uniforms: Tensor) -> None:
         """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's

@@ -188,6 +188,7 @@ class SkillChainingAgent(HierarchicalAgent):
             seed=seed, device=device, scale_step_size=p.scale_step_size,
             failure_bootstrap=p.failure_bootstrap, completion_reward=p.completion_reward,
             intra_option_primitives=p.intra_option_primitives,
+            intra_option_target=p.intra_option_target,
             interruption=p.option_interruption, option_epsilon=p.option_epsilon,
             max_option_steps=p.max_option_steps, gestation=p.gestation,
             max_branching=p.max_branching, convergence_threshold=p.convergence_threshold,

@@ -159,7 +159,8 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  *      max_option_steps, alpha_o, completion, step, step_stride, executable_from,
  *      out_obs, out_code, out_contains, out_phi, out_decision, out_option, out_action,
  *      out_ret, out_duration, q, d_next, decision_ended, option_delta, smdp_delta,
- *      info_duration, info_return, started, value, fail_boot, state_phi, interrupt, own)
+ *      info_duration, info_return, started, value, fail_boot, state_phi, interrupt, own,
+ *      ipo_primitives)
  *
  * HierarchicalAgent.transition for every row, given what needs torch or Python at s'
  * (memberships, targets, features, uniforms [P, 4]): the intra-option updates, the decision's
@@ -178,7 +179,8 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  * gestation samples). state_phi [P, F] (or 0): phi(s) of the current state, for intra-option
  * learning of the top-level primitive values (HierarchicalAgent's intra_option_primitives):
  * a step taken inside an option moves w[a] . phi(s) toward r + gamma max_d Q(s', d) over the
- * decisions available at s' (as smdp_row with k = 1); the row then holds phi(s').
+ * decisions available at s' (as smdp_row with k = 1), or over the primitives only where
+ * ipo_primitives; the row then holds phi(s').
  * interrupt: an executing option stops at s' where it is no longer the greedy decision
  * (HierarchicalAgent's interruption). own [P, K]: s in each option's own set (before the
  * no-overlap narrowing). The live options a transition from s updates are
@@ -192,10 +194,10 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         cols_p, status_p, u_p, step_p, o_obs, o_code, o_con, o_phi, o_dec, o_opt, o_act, o_ret,
         o_dur, q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p, value_p, sphi_p, own_p;
     double epsilon, option_epsilon, gamma, alpha_o, completion;
-    int use_gamma, fail_boot, interrupt;
+    int use_gamma, fail_boot, interrupt, ipo_primitives;
     long long max_option_steps, executable_from;
     if (!PyArg_ParseTuple(args,
-                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKKKiKiK",
+                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKKKiKiKi",
                           &P, &K, &A, &F, &Fo, &w_p, &wo_p, &obs_p, &code_p, &con_p, &phi_p,
                           &dec_p, &opt_p, &act_p, &ret_p, &dur_p, &nobs_p, &rew_p, &term_p,
                           &trunc_p, &st_p, &conn_p, &reach_p, &phin_p, &coden_p, &cols_p,
@@ -204,7 +206,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
                           &executable_from, &o_obs, &o_code, &o_con, &o_phi, &o_dec, &o_opt,
                           &o_act, &o_ret, &o_dur, &q_p, &dn_p, &de_p, &od_p, &sd_p, &id_p,
                           &ir_p, &started_p, &value_p, &fail_boot, &sphi_p, &interrupt,
-                          &own_p))
+                          &own_p, &ipo_primitives))
         return NULL;
     Py_ssize_t D = A + K;
     if (D > MAX_CHOICES) {
@@ -304,8 +306,8 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
          * option's, so the order of the two updates does not matter). */
         if (state_phi && inside)
             smdp_row(w + (p * D + action[p]) * F, state_phi + p * F, F, r, 1,
-                     term ? 0.0 : masked_max(qp, ok, D), term, step_size, step_stride, gamma,
-                     use_gamma);
+                     term ? 0.0 : masked_max(qp, ok, ipo_primitives ? A : D), term, step_size,
+                     step_stride, gamma, use_gamma);
         if (state_phi && go)
             for (Py_ssize_t f = 0; f < F; f++) state_phi[p * F + f] = phi_next[p * F + f];
         smdp_delta[p] = dec_end ? smdp_row(w + (p * D + decision[p]) * F, phi + p * F, F, R,

@@ -139,6 +139,8 @@ class StepRules(NamedTuple):
     completion_reward: float
     failure_bootstrap_primitives: bool  #: ``failure_bootstrap == "primitives"``
     intra_option_primitives: bool
+    #: those updates bootstrap on ``max_a Q(s', a)`` over the primitives only
+    intra_option_primitive_target: bool
     interruption: bool
 
 
@@ -233,6 +235,6 @@ def transition(state: StepState, learned: Learned, at_next: AtNext, rules: StepR
             started.data_ptr(), 0 if value is None else value.data_ptr(),
             int(rules.failure_bootstrap_primitives),
             0 if state_phi is None else state_phi.data_ptr(), int(rules.interruption),
-            own.data_ptr())  # fmt: skip
+            own.data_ptr(), int(rules.intra_option_primitive_target))  # fmt: skip
     return new, StepOutputs(q, decision_ended, info_duration, info_return, option_delta,
                             smdp_delta, started, value)

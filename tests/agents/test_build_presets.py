@@ -19,6 +19,7 @@ def built_values(agent: SkillChainingAgent) -> dict:
         failure_bootstrap=agent.failure_bootstrap,
         completion_reward=agent.option_update.completion_reward,
         intra_option_primitives=agent.intra_option_primitives,
+        intra_option_target=agent.intra_option_target,
         option_interruption=agent.interruption, option_order=head["order"],
         option_alpha=head["alpha"], option_epsilon=agent.option_epsilon,
         max_option_steps=d.max_option_steps, policy_start=d.policy_start,

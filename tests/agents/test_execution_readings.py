@@ -90,6 +90,36 @@ def test_intra_option_primitives_learn_the_options_steps(intra, native):
         s = s1
 
 
+@pytest.mark.parametrize("native", [False, True])
+def test_intra_option_target_primitives_leaves_the_options_value_out(native):
+    """With ``intra_option_target="primitives"`` the option's steps bootstrap on the best
+    primitive at s' even where the option (worth 100 there) is available: the option's
+    optimistic value is not copied into the primitives' values along its route."""
+    if native and not HierarchicalAgent(make_bank(), order=1, native=None).native:
+        pytest.skip("compiled agent kernels not built")
+    agent = make_agent(make_bank(), intra_option_primitives=True,
+                       intra_option_target="primitives", native=native)
+    prefer_option(agent, value=100.0)
+    agent.q_head.weight[:, 2, 0] = 7.0
+    agent.q_head.weight[:, 1, 1] = -3.0
+    s = obs((0.7, 0.5, 0.5, 0.5))
+    agent.begin(s)
+    s1 = obs((0.6, 0.4, 0.5, 0.5))  # in the option's set: max_d would be the option's 100
+    w, a, phi = agent.q_head.weight.clone(), int(agent.action[0]), agent.features(s)[0]
+    agent.transition(s1, torch.tensor([-1.0], dtype=F64), NO, NO, torch.tensor([True]))
+    assert agent.options.tolist() == [0]  # the option goes on
+    best = max(float(w[0, d] @ agent.features(s1)[0]) for d in range(5))
+    assert best < 100.0
+    expected = w.clone()
+    expected[0, a] += 0.01 * (-1.0 + best - float(w[0, a] @ phi)) * phi
+    torch.testing.assert_close(agent.q_head.weight[:, :5], expected[:, :5], rtol=0, atol=1e-12)
+
+
+def test_intra_option_target_is_checked():
+    with pytest.raises(ValueError, match="intra_option_target must be one of"):
+        make_agent(make_bank(), intra_option_primitives=True, intra_option_target="options")
+
+
 def test_intra_option_primitives_state_survives_a_checkpoint():
     """phi(s) of the current state is rebuilt from s on load: a resumed agent takes the same
     updates as one that never stopped."""

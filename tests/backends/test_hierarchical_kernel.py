@@ -120,7 +120,8 @@ def half_plane_bank(P, seed):
 @pytest.mark.parametrize(("gamma", "scaled", "intra", "interruption", "failure"), [
     (1.0, False, False, False, "decision"), (0.9, False, False, False, "decision"),
     (0.95, True, False, False, "decision"), (1.0, False, True, False, "primitives"),
-    (0.9, True, True, True, "primitives"), (1.0, False, False, True, "decision")])
+    (0.9, True, True, True, "primitives"), (1.0, False, False, True, "decision"),
+    (1.0, False, "primitives", False, "decision")])
 def test_compiled_transition_agrees_with_the_torch_path(gamma, scaled, intra, interruption,
                                                         failure):
     """Random transitions with terminations, truncations and rows not stepped: the same
@@ -130,7 +131,10 @@ def test_compiled_transition_agrees_with_the_torch_path(gamma, scaled, intra, in
     agents = [HierarchicalAgent(half_plane_bank(P, seed=1), order=2, alpha=0.01, gamma=gamma,
                                 epsilon=0.3, option_epsilon=0.3, seed=7,
                                 scale_step_size=scaled, completion_reward=50.0,
-                                intra_option_primitives=intra, interruption=interruption,
+                                intra_option_primitives=bool(intra),
+                                intra_option_target=("primitives" if intra == "primitives"
+                                                     else "decisions"),
+                                interruption=interruption,
                                 failure_bootstrap=failure, native=native)
               for native in (False, True)]  # fmt: skip
     g = gen(2)
