@@ -248,13 +248,16 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
 
     # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
     # parameters, buffers and submodules) costs more than the tensor maths for these.
-    _PLAIN = frozenset({"step_state", *STEP_FIELDS, "active", "last_q", "last_phi",
-                        "last_value", "_index", "_raw_contains", "last_available"})
+    _PLAIN = frozenset({"step_state", "active", "last_q", "last_phi", "last_value", "_index",
+                        "_raw_contains", "last_available"})
+    _STEP = frozenset(STEP_FIELDS)  # written into the declared StepState
     # The compiled transition also returns Q(s', d) of the decision in force (last_value).
     WANTS_VALUE = False
 
     def __setattr__(self, name, value):
-        if name in self._PLAIN:
+        if name in self._STEP:
+            setattr(self.step_state, name, value)
+        elif name in self._PLAIN:
             object.__setattr__(self, name, value)
         else:
             super().__setattr__(name, value)
@@ -358,10 +361,9 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         # Next top-level decision at s' (also the bootstrap decision d'). With intra-option
         # primitives or interruption, the rows inside an option value s' too.
         inside = stepped & executing
-        values_inside = self.intra_option_primitives or self.interruption
-        phi_next, d_next = self._choose(next_obs, phi_next, contains_next, u[:, :2],
-                                        rows=decision_ended | inside if values_inside
-                                        else decision_ended)  # fmt: skip
+        valued = decision_ended | inside if self.intra_option_primitives or self.interruption \
+            else decision_ended  # fmt: skip
+        phi_next, d_next = self._choose(next_obs, phi_next, contains_next, u[:, :2], rows=valued)
         if self.interruption:  # the option stops where it is no longer greedy
             decision_ended = decision_ended | self._interrupted(inside & ~decision_ended, phi_next)
         # Q(s', d') was valued when d' was chosen, with the same (not yet updated) weights.
@@ -390,11 +392,9 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         return info
 
     def extra_repr(self) -> str:
-        return (f"population={self.population}, slots={self.slots}, "
-                f"epsilon={self.epsilon}, option_epsilon={self.option_epsilon}, "
-                f"gamma={self.gamma}, max_option_steps={self.max_option_steps}, "
-                f"failure_bootstrap={self.failure_bootstrap}, "
-                f"intra_option_primitives={self.intra_option_primitives}, "
-                f"intra_option_target={self.intra_option_target}, "
-                f"interruption={self.interruption}, "
+        return (f"population={self.population}, slots={self.slots}, epsilon={self.epsilon}, "
+                f"option_epsilon={self.option_epsilon}, gamma={self.gamma}, max_option_steps="
+                f"{self.max_option_steps}, failure_bootstrap={self.failure_bootstrap}, "
+                f"intra_option_primitives={self.intra_option_primitives} "
+                f"({self.intra_option_target}), interruption={self.interruption}, "
                 f"active={int(self._index.numel())}, native={self.native}")
