@@ -119,7 +119,8 @@ class CounterRNG:
     def _draw(self, n: int, mask: Tensor | None, uniform: bool) -> Tensor | None:
         """The compiled draw (words or uniforms, the same bits), or ``None`` where it does not
         apply."""
-        drawn = backend.draw(self.seeds, self.counter, n, mask, self._salt, uniform)
+        drawn = (backend.draw(self.seeds, self.counter, n, mask, self._salt, uniform)
+                 if backend.NATIVE else None)  # (switched off: the torch path never enters it)
         if drawn is None:
             return None
         out, self.counter = drawn

@@ -63,7 +63,7 @@ def event_list(bank: OptionBank, num_base: int,
     A base event is listed until ``max_branching`` options target it; slot j's initiation set
     is listed once the option is LEARNED, until ``max_branching`` options target it.
     """
-    if backend.applies(bank.status):
+    if backend.NATIVE and backend.applies(bank.status):
         return backend.event_list(bank.parent, bank.target_event, bank.status,
                                            num_base, max_branching)  # fmt: skip
     base, slot = targeting(bank, num_base)
@@ -89,7 +89,7 @@ def target_indicator(bank: OptionBank, base_fired: Tensor, contains: Tensor) -> 
 
     The same answer as :meth:`OptionBank.target_reached`, without evaluating any event again.
     """
-    if backend.applies(contains, bank.status):
+    if backend.NATIVE and backend.applies(contains, bank.status):
         return backend.target_indicator(bank.parent, bank.target_event, bank.status,
                                                  base_fired, contains)  # fmt: skip
     chained = bank.parent >= 0

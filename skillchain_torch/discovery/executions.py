@@ -100,7 +100,7 @@ class ExecutionTrace:
     def record(self, rows: Tensor, step: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` as step ``step [P]`` (0-based)."""
         if (self.states.dtype == torch.float64 and self.states.shape[-1] == OBS_DIM
-                and backend.applies(self.states, rows)):  # fmt: skip
+                and backend.NATIVE and backend.applies(self.states, rows)):  # fmt: skip
             backend.record(self.states, rows, step, obs)
             return
         index = rows.nonzero()[:, 0]

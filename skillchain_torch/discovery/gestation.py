@@ -123,7 +123,7 @@ class RecentStates:
 
     def record(self, rows: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` (the state a transition starts from)."""
-        if backend.record_ring(self.states, self.steps, rows, obs):
+        if backend.NATIVE and backend.record_ring(self.states, self.steps, rows, obs):
             return  # the same writes, compiled (this runs every step)
         index = rows.nonzero()[:, 0]
         if index.numel() == 0:

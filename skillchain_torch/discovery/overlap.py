@@ -57,7 +57,7 @@ def overlap_exclusion(bank: OptionBank) -> Tensor:
 def exclude_overlap(contains: Tensor, exclusion: Tensor, trained: Tensor) -> Tensor:
     """The effective memberships ``[P, K]``: ``contains`` minus the trained sets each option
     must avoid (``exclusion`` from :func:`overlap_exclusion`)."""
-    if backend.applies(contains, exclusion):
+    if backend.NATIVE and backend.applies(contains, exclusion):
         return backend.exclude_overlap(contains, exclusion, trained)
     blocking = contains & trained  # [P, J]
     excluded = (exclusion & blocking[:, None, :]).any(-1)

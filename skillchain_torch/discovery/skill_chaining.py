@@ -270,7 +270,7 @@ class SkillChaining(StepRules, EpisodeRules):
         self._finish_executions(option, reached, duration, decision_ended & stepped,
                                 terminated)  # fmt: skip
         sample = value  # Q(s, d) of the decision in force
-        if backend.applies(contains, stepped):  # the same rules, compiled
+        if backend.NATIVE and backend.applies(contains, stepped):  # the same rules, compiled
             self.gestation_q, base_trig, slot_trig, self.base_now, any_listed, hits = (
                 backend.triggers(bank.parent, bank.target_event, bank.status,
                                           self.base_now, self._base_next, raw_now,

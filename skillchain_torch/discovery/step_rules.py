@@ -66,7 +66,7 @@ class StepRules:
     def _finish_executions(self, option: Tensor, reached: Tensor, duration: Tensor,
                            ended: Tensor, terminated: Tensor) -> None:  # fmt: skip
         """Examples, refits and dropped updates of the executions that ended."""
-        if backend.applies(option, reached):  # the same outcomes, compiled
+        if backend.NATIVE and backend.applies(option, reached):  # the same outcomes, compiled
             slot, success, failure, any_ended, any_failure = backend.outcomes(
                 option, reached, duration, ended, terminated, self.max_option_steps,
                 self._outcomes_out)  # fmt: skip

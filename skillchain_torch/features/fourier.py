@@ -52,7 +52,8 @@ class FourierBasis(nn.Module):
         if x.dtype != self._k.dtype:
             x = x.to(self._k.dtype)
         x = x.reshape(-1, self.dim)
-        phi = backend.features(x, self.dim, self.order, self.num_features)  # the same bits
+        phi = (backend.features(x, self.dim, self.order, self.num_features)  # the same bits
+               if backend.NATIVE else None)
         if phi is not None:
             return phi.reshape(*lead, self.num_features)
         n = x.shape[0]
