@@ -167,21 +167,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="reading: fit an initiation set only once it holds both classes",
     )
-    train.add_argument(
-        "--keep-negatives",
-        choices=("on", "off"),
-        default=None,
-        help="initiation-set stores never drop a failure to make room for a success's "
-        "positives",
-    )
-    train.add_argument(
-        "--intra-option-primitives",
-        choices=("on", "off"),
-        default=None,
-        help="the top level's primitive values also learn from the steps options take "
-        "(one-step Q-learning; default off: only from the agent's own primitive decisions, "
-        "as the paper's SMDP Sarsa)",
-    )
+    _on_off(train, "--keep-negatives",
+            "initiation-set stores never drop a failure to make room for a success's "
+            "positives")
+    _on_off(train, "--intra-option-primitives",
+            "the top level's primitive values also learn from the steps options take "
+            "(one-step Q-learning; default off: only from the agent's own primitive decisions, "
+            "as the paper's SMDP Sarsa)")
     train.add_argument(
         "--intra-option-target",
         choices=("decisions", "primitives"),
@@ -189,13 +181,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --intra-option-primitives on: what those steps bootstrap on at s', the best "
         "decision (options included) or the best primitive" + _presets("intra_option_target"),
     )
-    train.add_argument(
-        "--option-interruption",
-        choices=("on", "off"),
-        default=None,
-        help="an executing option stops where it is no longer the top level's greedy decision "
-        "(default off: options run to their end, as the paper's)",
-    )
+    _on_off(train, "--option-interruption",
+            "an executing option stops where it is no longer the top level's greedy decision "
+            "(default off: options run to their end, as the paper's)")
     train.add_argument(
         "--failure-bootstrap",
         choices=("decision", "primitives"),
@@ -363,6 +351,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.commands = {"train": train, "summarize": summary, "reproduce": reproduce,
                        "verify": verify, "sweep": sweep}
     return parser
+
+
+def _on_off(parser, flag: str, help: str) -> None:
+    """A reading given as ``on`` / ``off`` (not given: the preset's; ``cli`` reads it as a bool)."""
+    parser.add_argument(flag, choices=("on", "off"), default=None, help=help)
 
 
 def _presets(field: str) -> str:
