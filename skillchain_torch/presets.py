@@ -147,6 +147,7 @@ class Preset:
     capacity: int
     balanced: bool
     keep_negatives: bool
+    store_failures: bool
     initiation_bias: float
     initiation_centered: bool
     gestation_positives: int
@@ -201,6 +202,7 @@ PAPER = Preset(
     capacity=500,  # silent on how many examples are kept: library default
     balanced=True,  # silent on class weights: library default (trainers/README.md)
     keep_negatives=True,  # silent on which examples a full store drops: library default
+    store_failures=False,  # silent (its classifier keeps every example): library default
     initiation_bias=0.0,  # 5.1: "initialized to be true everywhere" (untrained: all true)
     initiation_centered=False,  # 5.1: polynomial features of the state as it is
     gestation_positives=0,  # 5.1: examples come from executions only

@@ -23,14 +23,14 @@ __all__ = ["build_parser", "CONFIG_OPTIONS"]
 
 # Options that define the run; with --resume the saved config is used instead.
 CONFIG_OPTIONS = (
-    "agent", "preset", "map", "env", "obs_bounds", "runs", "episodes", "seed", "alpha",
-    "epsilon", "gamma", "order",
-    "scale_step_size", "max_episode_steps", "checkpoint_every", "options", "options_agent",
-    "slots", "initiation_bias", "initiation_centered", "gestation_positives",
+    "agent", "preset", "map", "env", "obs_bounds", "runs", "episodes", "seed", "alpha", "epsilon",
+    "gamma", "order", "scale_step_size", "max_episode_steps", "checkpoint_every", "options",
+    "options_agent", "slots", "initiation_bias", "initiation_centered", "gestation_positives",
     "initiation_start", "initiation_constrain", "one_class_fits", "failure_bootstrap",
-    "keep_negatives", "intra_option_primitives", "intra_option_target", "option_interruption",
-    "policy_start", "value_start", "value_bonus", "option_alpha", "completion_reward", "gestation",
-    "convergence_threshold", "top_head", "option_head", "initiation", "max_branching",
+    "keep_negatives", "store_failures", "intra_option_primitives", "intra_option_target",
+    "option_interruption", "policy_start", "value_start", "value_bonus", "option_alpha",
+    "completion_reward", "gestation", "convergence_threshold", "top_head", "option_head",
+    "initiation", "max_branching",
 )  # fmt: skip
 
 
@@ -170,6 +170,9 @@ def build_parser() -> argparse.ArgumentParser:
     _on_off(train, "--keep-negatives",
             "initiation-set stores never drop a failure to make room for a success's "
             "positives")
+    _on_off(train, "--store-failures",
+            "a full initiation-set store never rejects a failure's start state (it replaces a "
+            "stored positive); off: the reservoir keeps it with probability 500 / (n + 1)")
     _on_off(train, "--intra-option-primitives",
             "the top level's primitive values also learn from the steps options take "
             "(one-step Q-learning; default off: only from the agent's own primitive decisions, "

@@ -21,11 +21,12 @@
 
 /* The classifier's stores, as passed to store and store_executions after their own
  * arguments: seeds, generation, salt, flags, seen, examples, labels, count, touched. flags:
- * bit 0 ring replacement, bit 1 keep negatives (a positive never replaces a stored negative). */
+ * bit 0 ring replacement, bit 1 keep negatives (a positive never replaces a stored negative),
+ * bit 2 store failures (a negative always enters a full store: examples.failure_place). */
 typedef struct {
     const int64_t *seeds, *generation;
     uint64_t salt;
-    int ring, keep_negatives;
+    int ring, keep_negatives, store_failures;
     int64_t *seen, *count;
     double *examples;
     uint8_t *labels, *touched;
@@ -39,18 +40,32 @@ static Stores make_stores(unsigned long long seeds_p, unsigned long long gen_p, 
                           unsigned long long t_p)
 {
     Stores st = {(const int64_t *)(uintptr_t)seeds_p, (const int64_t *)(uintptr_t)gen_p,
-                 (uint64_t)salt, ring & 1, (ring >> 1) & 1, (int64_t *)(uintptr_t)seen_p,
+                 (uint64_t)salt, ring & 1, (ring >> 1) & 1, (ring >> 2) & 1,
+                 (int64_t *)(uintptr_t)seen_p,
                  (int64_t *)(uintptr_t)cnt_p,
                  (double *)(uintptr_t)ex_p, (uint8_t *)(uintptr_t)lab_p,
                  (uint8_t *)(uintptr_t)t_p};
     return st;
 }
 
+/* The reservoir's draw for the example numbered `index` of store s (agent p, slot k):
+ * min(floor(u (index + 1)), index), u = examples.reservoir_uniform(seed, k, generation, index). */
+static int64_t draw_place(const Stores *st, int64_t p, int64_t k, int64_t s, int64_t index)
+{
+    uint64_t key = splitmix64((uint64_t)st->seeds[p] ^ st->salt);
+    key = splitmix64(key + (uint64_t)k * GOLDEN_GAMMA);
+    key = splitmix64(key + (uint64_t)st->generation[s] * GOLDEN_GAMMA);
+    uint64_t bits = splitmix64(key + (uint64_t)index * GOLDEN_GAMMA) >> 11;
+    double u = (double)(int64_t)bits * 0x1p-53;
+    int64_t draw = (int64_t)floor(u * (double)(index + 1));
+    return draw > index ? index : draw;
+}
+
 /* Store one example of agent p's slot k as add_examples does: the example numbered `seen` of
  * its slot takes place `seen` while the slot has room, then (ring) place seen % C, or
  * (reservoir) place min(floor(u (seen + 1)), seen) if that is below C, with
  * u = examples.reservoir_uniform(seed, slot, generation, seen); seen, count (= min(seen, C))
- * and touched follow. */
+ * and touched follow. With store_failures a negative of a full store is never rejected. */
 static void store_in(const Stores *st, int64_t p, int64_t k, int64_t K, int64_t C,
                      const double *point, int label)
 {
@@ -60,18 +75,22 @@ static void store_in(const Stores *st, int64_t p, int64_t k, int64_t K, int64_t 
     if (st->ring) {
         place = index % C;
     } else if (index >= C) {
-        uint64_t key = splitmix64((uint64_t)st->seeds[p] ^ st->salt);
-        key = splitmix64(key + (uint64_t)k * GOLDEN_GAMMA);
-        key = splitmix64(key + (uint64_t)st->generation[s] * GOLDEN_GAMMA);
-        uint64_t bits = splitmix64(key + (uint64_t)index * GOLDEN_GAMMA) >> 11;
-        double u = (double)(int64_t)bits * 0x1p-53;
-        int64_t draw = (int64_t)floor(u * (double)(index + 1));
-        if (draw > index) draw = index;
+        int64_t draw = draw_place(st, p, k, s, index);
         place = draw < C ? draw : -1;
     }
     /* keep negatives: a positive landing on a stored negative is dropped instead */
     if (place >= 0 && label && st->keep_negatives && index >= C && !st->labels[s * C + place])
         place = -1;
+    /* store failures: a negative is never rejected; from the drawn place (draw mod C) it takes
+     * the first stored positive, cyclically, or the drawn place if none is left */
+    if (!label && st->store_failures && !st->ring && index >= C) {
+        int64_t first = draw_place(st, p, k, s, index) % C;
+        place = first;
+        for (int64_t j = 0; j < C; j++) {
+            int64_t q = (first + j) % C;
+            if (st->labels[s * C + q]) { place = q; break; }
+        }
+    }
     st->touched[s] = 1;
     st->count[s] = st->seen[s] < C ? st->seen[s] : C;
     if (place < 0) return;

@@ -67,6 +67,7 @@ class Stores(NamedTuple):
     seeds: Tensor  #: ``[P]`` int64: the agents' seeds (the reservoir's draws use them)
     ring: bool  #: ``replacement == "ring"`` (the newest C), else the reservoir
     keep_negatives: bool  #: a positive never replaces a stored negative
+    store_failures: bool = False  #: a negative always enters a full store (failure_place)
 
 
 def contains(factors: Tensor, centered: bool, weight: Tensor, bias: Tensor,
@@ -123,9 +124,9 @@ def fit(factors: Tensor, centered: bool, mask: Tensor, examples: Tensor,
 def _stores(stores: Stores, touched: Tensor) -> tuple:
     """The store arguments of the C ``store`` functions, in their order."""
     return (stores.seeds.data_ptr(), stores.generation.data_ptr(), RESERVOIR_STREAM,
-            int(stores.ring) | (int(stores.keep_negatives) << 1), stores.seen.data_ptr(),
-            stores.examples.data_ptr(), stores.labels.data_ptr(), stores.count.data_ptr(),
-            touched.data_ptr())  # fmt: skip
+            int(stores.ring) | int(stores.keep_negatives) << 1 | int(stores.store_failures) << 2,
+            stores.seen.data_ptr(), stores.examples.data_ptr(), stores.labels.data_ptr(),
+            stores.count.data_ptr(), touched.data_ptr())  # fmt: skip
 
 
 def store(stores: Stores, agents: Tensor, slots: Tensor, obs: Tensor, labels: Tensor,

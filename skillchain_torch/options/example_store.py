@@ -27,7 +27,7 @@ from torch import Tensor
 
 from skillchain_torch.backends import initiation as backend
 from skillchain_torch.backends.native import for_c
-from skillchain_torch.options.examples import store_places
+from skillchain_torch.options.examples import failure_place, store_places
 from skillchain_torch.options.nearby import within_any
 from skillchain_torch.options.status import check_slot_mask
 
@@ -39,7 +39,7 @@ class ExampleStores:
 
     Reads the classifier's buffers ``examples [P, K, C, D]``, ``labels``, ``count``, ``seen``,
     ``generation``, ``seeds``, ``dirty`` and settings ``capacity``, ``replacement``,
-    ``keep_negatives``, ``distance``, ``distance_dims``, ``native``.
+    ``keep_negatives``, ``store_failures``, ``distance``, ``distance_dims``, ``native``.
     """
 
     @property
@@ -48,7 +48,7 @@ class ExampleStores:
         the buffers in place)."""
         return backend.Stores(self.examples, self.labels, self.count, self.seen,
                               self.generation, self.seeds, self.replacement == "ring",
-                              self.keep_negatives)  # fmt: skip
+                              self.keep_negatives, self.store_failures)  # fmt: skip
 
     def _within(self, points: Tensor, examples: Tensor) -> Tensor:
         """``|point - example| <= distance`` (in ``distance_dims``) for every pair:
@@ -137,12 +137,16 @@ class ExampleStores:
         if n == 0:
             return touched.reshape(self.population, self.slots)
         labels = labels.to(device).to(torch.bool)
-        if self.keep_negatives and n > 1 and not bool((labels == labels[0]).all()):
+        failures = self.store_failures and self.replacement == "reservoir"
+        if n > 1 and ((self.keep_negatives and not bool((labels == labels[0]).all()))
+                      or (failures and not bool(labels.all()))):  # fmt: skip
             # Mixed labels: one at a time, so each positive sees the labels stored before it.
             for i in range(n):
                 touched |= self.add_examples(p[i], k[i], obs[i:i + 1], labels[i:i + 1]).reshape(-1)
             return touched.reshape(self.population, self.slots)
         flat = p * self.slots + k
+        if failures and not bool(labels[0]) and int(self.seen[p[0], k[0]]) >= self.capacity:
+            return self._store_failure(p[0], k[0], obs[0])
         cell, keep = store_places(flat, self.seen.reshape(-1), self.seeds[p], k,
                                   self.generation[p, k], self.capacity, self.replacement)
         if self.keep_negatives and bool(labels[0]):
@@ -158,6 +162,20 @@ class ExampleStores:
         self.count.copy_(torch.clamp(self.seen, max=self.capacity))
         touched[flat] = True
         touched = touched.reshape(self.population, self.slots)
+        self.dirty |= touched
+        return touched
+
+    def _store_failure(self, p: Tensor, k: Tensor, point: Tensor) -> Tensor:
+        """A negative example of agent ``p``'s full slot ``k`` under ``store_failures``: it
+        takes :func:`~.examples.failure_place`, whatever the reservoir would have drawn."""
+        place = failure_place(self.seeds[p], k, self.generation[p, k], self.seen[p, k],
+                              self.capacity, self.labels[p, k])  # fmt: skip
+        self.examples[p, k, place] = point.to(self.examples.dtype)
+        self.labels[p, k, place] = False
+        self.seen[p, k] += 1
+        self.count.copy_(torch.clamp(self.seen, max=self.capacity))
+        touched = torch.zeros_like(self.dirty)
+        touched[p, k] = True
         self.dirty |= touched
         return touched
 

@@ -25,7 +25,7 @@ from torch import Tensor
 
 from skillchain_torch.rng import GOLDEN_GAMMA, logical_rshift, splitmix64, stream_key
 
-__all__ = ["REPLACEMENTS", "RESERVOIR_STREAM", "reservoir_uniform", "store_places"]
+__all__ = ["REPLACEMENTS", "RESERVOIR_STREAM", "reservoir_uniform", "store_places", "failure_place"]
 
 REPLACEMENTS = ("reservoir", "ring")
 RESERVOIR_STREAM = stream_key(0x1417)  # the reservoir's salt (also read by the C stores)
@@ -82,3 +82,28 @@ def store_places(flat: Tensor, seen: Tensor, seed: Tensor, slot: Tensor, generat
     last = torch.ones_like(cell, dtype=torch.bool)
     last[:-1] = cell[1:] != cell[:-1]
     return cell[last], placed[order[last]]
+
+
+def failure_place(seed: Tensor, slot: Tensor, generation: Tensor, index: Tensor, capacity: int,
+                  stored_labels: Tensor) -> int:  # fmt: skip
+    """The place a failure (negative example) number ``index >= capacity`` takes in a full
+    store under ``store_failures``: never rejected, it replaces the first stored *positive*
+    from the reservoir's draw ``mod capacity`` on (cyclically), or the drawn place if every
+    stored example is a negative. Late in a run a slot has seen tens of thousands of examples,
+    and a plain reservoir keeps a new failure with probability ``capacity / (index + 1)``
+    (about 2%), so the set stops learning where its option fails.
+
+    Args: one example's ``seed``, ``slot``, ``generation``, ``index`` (0-d tensors), the
+    store's ``capacity`` and its ``stored_labels [capacity]`` (bool).
+
+    Example:
+        >>> z = torch.tensor(0)
+        >>> labels = torch.tensor([False, True, False, True])
+        >>> failure_place(z, z, z, torch.tensor(9), 4, labels) in (1, 3)
+        True
+    """
+    u = reservoir_uniform(seed, slot, generation, index)
+    draw = min(int(torch.floor(u * float(int(index) + 1))), int(index))
+    first = draw % capacity
+    positive = stored_labels.roll(-first).nonzero()
+    return (first + int(positive[0, 0])) % capacity if positive.numel() else first

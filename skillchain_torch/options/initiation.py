@@ -60,6 +60,10 @@ class InitiationClassifier(ExampleStores, nn.Module):
             negative, so a plain reservoir soon holds one or two failures (measured: 499
             positives and 1 negative after 40 episodes) and the set cannot shrink where the
             option fails; the paper's classifier sees every example.
+        store_failures: a full store never rejects a *negative*: it replaces a stored
+            positive (:func:`~.examples.failure_place`). A reservoir keeps the ``n``-th example
+            with probability ``C / (n + 1)``, about 2% late in a run: the set stops shrinking
+            where its option fails, while the paper's classifier sees every example.
         balanced: weight the two classes equally in the loss (scikit-learn's
             ``class_weight="balanced"``): unweighted, a success's 250 positives outvote the
             single negative of each failure and the set stays wide where the option fails.
@@ -98,8 +102,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
     trains its ``requires_grad`` parameters by :meth:`make_optimizer` (SGD at ``lr``, default)
     on the same stores and loss, the convergence test compares its logits on fixed probe
     points (:meth:`snapshot`), images use it, and :meth:`OptionBank.load` rebuilds it once it is
-    registered (:func:`~skillchain_torch.options.register_classifier`). See
-    :mod:`skillchain_torch.options.initiation_fit`.
+    registered (:func:`~skillchain_torch.options.register_classifier`; :mod:`.initiation_fit`).
     """
 
     def __init__(
@@ -114,6 +117,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
         distance_dims: tuple[int, ...] | list[int] | None = None,
         replacement: str = "reservoir",
         keep_negatives: bool = False,
+        store_failures: bool = False,
         balanced: bool = False,
         initial_bias: float = 0.0,
         centered: bool = False,
@@ -138,12 +142,15 @@ class InitiationClassifier(ExampleStores, nn.Module):
         self.distance_dims, self.replacement = dims, replacement
         self.balanced = bool(balanced)
         self.keep_negatives = bool(keep_negatives)
+        self.store_failures = bool(store_failures)
         self.config: dict[str, Any] = dict(
             population=population, slots=slots, degree=degree, lr=self.lr, sweeps=self.sweeps,
             capacity=capacity, distance=self.distance, distance_dims=list(dims),
             replacement=replacement, keep_negatives=self.keep_negatives, balanced=self.balanced,
             initial_bias=float(initial_bias), centered=bool(centered), dtype=dtype_name(dtype),
         )  # fmt: skip
+        if self.store_failures:  # (files saved before it keep their config as it was)
+            self.config["store_failures"] = True
         if self.obs_dim != OBS_DIM:  # (Pinball's files keep their config as it was)
             self.config["obs_dim"] = self.obs_dim
         self.initial_bias, self.centered = float(initial_bias), bool(centered)

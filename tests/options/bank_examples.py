@@ -41,3 +41,30 @@ def trained_bank(population=3, slots=4, seed=0, q_head=None):
     bank.set_status(torch.tensor([[True, False, False, False]] * population),
                     OptionStatus.LEARNING)  # fmt: skip
     return bank
+
+
+def random_batches(clf, rounds, seed=5):
+    """Add ``rounds`` random batches of 1-11 examples (about 80% positive) to random agents
+    and slots of a two-agent, two-slot ``clf``: the stores' torch and compiled paths must agree."""
+    gen = torch.Generator().manual_seed(seed)
+    for _ in range(rounds):
+        n = int(torch.randint(1, 12, (1,), generator=gen))
+        x = torch.rand(n, 4, dtype=F64, generator=gen)
+        labels = torch.rand(n, generator=gen) < 0.8
+        agents = torch.randint(0, 2, (n,), generator=gen)
+        clf.add_examples(agents, torch.randint(0, 2, (n,), generator=gen), x, labels)
+    return clf
+
+
+def compiled_stores_agree(rounds, **settings):
+    """Run :func:`random_batches` on a torch-path and a compiled classifier (two agents, two
+    slots, 16 places, ``settings``), assert their stores are the same bits; the compiled one."""
+    stores = []
+    for native in (False, True):
+        clf = InitiationClassifier(population=2, slots=2, capacity=16, sweeps=0, **settings)
+        clf.set_native(native)
+        stores.append(random_batches(clf, rounds))
+    torch_path, compiled = stores
+    for name in ("examples", "labels", "count", "seen"):
+        assert torch.equal(getattr(torch_path, name), getattr(compiled, name)), name
+    return compiled

@@ -5,6 +5,7 @@ import importlib
 
 import pytest
 import torch
+from bank_examples import compiled_stores_agree
 
 from skillchain_torch.options import InitiationClassifier, reservoir_uniform
 
@@ -370,20 +371,5 @@ def test_keep_negatives_same_stores_torch_and_compiled_with_mixed_batches():
 
     if not native_initiation.AVAILABLE:
         pytest.skip("compiled classifier not built")
-    stores = []
-    for native in (False, True):
-        clf = InitiationClassifier(population=2, slots=2, capacity=16, sweeps=0,
-                                   keep_negatives=True)
-        clf.set_native(native)
-        gen = torch.Generator().manual_seed(5)
-        for _ in range(30):
-            n = int(torch.randint(1, 12, (1,), generator=gen))
-            x = torch.rand(n, 4, dtype=F64, generator=gen)
-            labels = torch.rand(n, generator=gen) < 0.8
-            agents = torch.randint(0, 2, (n,), generator=gen)
-            clf.add_examples(agents, torch.randint(0, 2, (n,), generator=gen), x, labels)
-        stores.append(clf)
-    torch_path, compiled = stores
-    for name in ("examples", "labels", "count", "seen"):
-        assert torch.equal(getattr(torch_path, name), getattr(compiled, name)), name
+    compiled = compiled_stores_agree(30, keep_negatives=True)
     assert int((~compiled.labels).sum()) > 0
