@@ -148,6 +148,7 @@ class Preset:
     balanced: bool
     keep_negatives: bool
     store_failures: bool
+    constrain_nearest: bool
     initiation_bias: float
     initiation_centered: bool
     gestation_positives: int
@@ -203,6 +204,7 @@ PAPER = Preset(
     balanced=True,  # silent on class weights: library default (trainers/README.md)
     keep_negatives=True,  # silent on which examples a full store drops: library default
     store_failures=False,  # silent (its classifier keeps every example): library default
+    constrain_nearest=False,  # 5.1: the 0.1 constraint alone
     initiation_bias=0.0,  # 5.1: "initialized to be true everywhere" (untrained: all true)
     initiation_centered=False,  # 5.1: polynomial features of the state as it is
     gestation_positives=0,  # 5.1: examples come from executions only

@@ -27,10 +27,10 @@ CONFIG_OPTIONS = (
     "gamma", "order", "scale_step_size", "max_episode_steps", "checkpoint_every", "options",
     "options_agent", "slots", "initiation_bias", "initiation_centered", "gestation_positives",
     "initiation_start", "initiation_constrain", "one_class_fits", "failure_bootstrap",
-    "keep_negatives", "store_failures", "intra_option_primitives", "intra_option_target",
-    "option_interruption", "policy_start", "value_start", "value_bonus", "option_alpha",
-    "completion_reward", "gestation", "convergence_threshold", "top_head", "option_head",
-    "initiation", "max_branching",
+    "keep_negatives", "store_failures", "constrain_nearest", "intra_option_primitives",
+    "intra_option_target", "option_interruption", "policy_start", "value_start", "value_bonus",
+    "option_alpha", "completion_reward", "gestation", "convergence_threshold", "top_head",
+    "option_head", "initiation", "max_branching",
 )  # fmt: skip
 
 
@@ -168,11 +168,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="reading: fit an initiation set only once it holds both classes",
     )
     _on_off(train, "--keep-negatives",
-            "initiation-set stores never drop a failure to make room for a success's "
-            "positives")
-    _on_off(train, "--store-failures",
-            "a full initiation-set store never rejects a failure's start state (it replaces a "
-            "stored positive); off: the reservoir keeps it with probability 500 / (n + 1)")
+            "initiation-set stores never drop a failure to make room for a success's positives")
+    _on_off(train, "--store-failures", "a full initiation-set store never rejects a failure "
+            "(it replaces a positive; off: the reservoir keeps it with chance 500 / (n + 1))")
+    _on_off(train, "--constrain-nearest", "a learned set leaves out states nearer to a stored "
+            "failure than to any stored positive (off: the paper's 0.1 constraint alone)")
     _on_off(train, "--intra-option-primitives",
             "the top level's primitive values also learn from the steps options take "
             "(one-step Q-learning; default off: only from the agent's own primitive decisions, "

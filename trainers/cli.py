@@ -138,8 +138,8 @@ def _config_from_args(parser, args) -> TrainConfig:
     given = {k: v for k, v in given.items() if v is not None}
     if given.get("options_agent") == "each":
         given["options_agent"] = None
-    for name in ("keep_negatives", "store_failures", "intra_option_primitives",
-                 "option_interruption"):
+    for name in ("keep_negatives", "store_failures", "constrain_nearest",
+                 "intra_option_primitives", "option_interruption"):
         if name in given:
             given[name] = given[name] == "on"
     if args.device is not None:

@@ -108,9 +108,8 @@ class TrainConfig:
             :class:`~skillchain_torch.agents.HierarchicalAgent`'s arguments of those names.
         option_interruption: (preset) ``interruption`` of
             :class:`~skillchain_torch.agents.HierarchicalAgent`.
-        keep_negatives, store_failures: (preset) the initiation classifiers' stores never
-            drop a failure to make room for a success's positives; a full store never rejects
-            a failure (see :class:`~skillchain_torch.options.InitiationClassifier`).
+        keep_negatives, store_failures, constrain_nearest: (preset) see
+            :class:`~skillchain_torch.options.InitiationClassifier`'s arguments of those names.
         policy_start: (preset) how a joining option's policy starts (``"zero"``: gestation's
             updates of zero weights; ``"top-level"``: the agent's own primitive values
             projected onto the option's basis; ``"top-level-shifted"``: that copy on the
@@ -172,6 +171,7 @@ class TrainConfig:
     failure_bootstrap: str | None = None
     keep_negatives: bool | None = None
     store_failures: bool | None = None
+    constrain_nearest: bool | None = None
     intra_option_primitives: bool | None = None
     intra_option_target: str | None = None
     option_interruption: bool | None = None

@@ -15,7 +15,7 @@ LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_neg
                  "option_alpha": 0.0005,
                  "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15,
                  "intra_option_primitives": False, "intra_option_target": "decisions",
-                 "store_failures": False,
+                 "store_failures": False, "constrain_nearest": False,
                  "option_interruption": False,
                  "top_head": "fourier", "option_head": "fourier", "initiation": "logistic",
                  "max_branching": 3}
@@ -31,7 +31,8 @@ LABEL_FIELDS = ("preset",)
 # changes them (so a flat run stays valid when a skill-chaining default changes).
 _DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestation_positives",
                      "initiation_start", "initiation_constrain", "one_class_fits",
-                     "keep_negatives", "store_failures", "policy_start", "value_start",
+                     "keep_negatives", "store_failures", "constrain_nearest", "policy_start",
+                     "value_start",
                      "value_bonus", "option_alpha", "gestation", "convergence_threshold",
                      "max_branching")
 _PIECES = ("top_head", "option_head", "initiation")

@@ -176,6 +176,7 @@ class SkillChainingAgent(HierarchicalAgent):
                                 sweeps=p.sweeps, capacity=p.capacity, distance=p.distance,
                                 balanced=p.balanced, keep_negatives=p.keep_negatives,
                                 store_failures=p.store_failures,
+                                constrain_nearest=p.constrain_nearest,
                                 initial_bias=p.initiation_bias,
                                 centered=p.initiation_centered, **sizes)  # fmt: skip
         bank = assemble_bank(bank, names["option_head"], names["initiation"], seed=seed)

@@ -82,6 +82,29 @@ NATIVE_CLONES static int near_positive(const double *point, const double *exampl
     return 0;
 }
 
+/* constrain_nearest's test: within `distance` of a stored positive, and no stored negative
+ * strictly nearer than the nearest positive (squared distances as near_positive's; every
+ * stored example is read, so it runs only where the classifier asks for it). */
+static int nearest_is_positive(const double *point, const double *examples,
+                               const uint8_t *labels, long count, const uint8_t *dims,
+                               double distance)
+{
+    double m0 = dims[0], m1 = dims[1], m2 = dims[2], m3 = dims[3];
+    double positive = INFINITY, negative = INFINITY;
+    for (long c = 0; c < count; c++) {
+        const double *e = examples + c * OBS_DIM;
+        double d0 = (point[0] - e[0]) * m0, d1 = (point[1] - e[1]) * m1;
+        double d2 = (point[2] - e[2]) * m2, d3 = (point[3] - e[3]) * m3;
+        double squared = ((d0 * d0 + d1 * d1) + d2 * d2) + d3 * d3;
+        if (labels[c]) {
+            if (squared < positive) positive = squared;
+        } else if (squared < negative) {
+            negative = squared;
+        }
+    }
+    return positive <= distance * distance && !(negative < positive);
+}
+
 /* The first PREFETCH_AHEAD examples of a slot's store and its first labels, asked for early. */
 static inline void fetch_first_examples(const double *examples, const uint8_t *labels)
 {
@@ -109,8 +132,9 @@ static void polynomial_row(const double *obs, const int64_t *factor_index, Py_ss
 }
 
 /* contains(P, K, F, C, factor_index, degree, centered, weight, bias, trained, constrained,
- * obs, examples, labels, count, dims, distance, out): out[p, k] = (logit > 0 or untrained),
- * and for constrained slots also near a stored positive. factor_index [F, degree] (int64),
+ * obs, examples, labels, count, dims, distance, out, nearest): out[p, k] = (logit > 0 or
+ * untrained), and for constrained slots also near a stored positive (and with nearest, no
+ * stored negative nearer than the nearest positive). factor_index [F, degree] (int64),
  * weight [P, K, F], bias [P, K], obs [P, 4], examples [P, K, C, 4], labels [P, K, C],
  * count [P, K] (int64), dims uint8 [4]. */
 NATIVE_CLONES static PyObject *contains(PyObject *self, PyObject *args)
@@ -118,10 +142,10 @@ NATIVE_CLONES static PyObject *contains(PyObject *self, PyObject *args)
     Py_ssize_t P, K, F, C, degree;
     unsigned long long fi_p, w_p, b_p, tr_p, co_p, obs_p, ex_p, lab_p, cnt_p, dims_p, out_p;
     double distance;
-    int centered;
-    if (!PyArg_ParseTuple(args, "nnnnKniKKKKKKKKKdK", &P, &K, &F, &C, &fi_p, &degree,
+    int centered, nearest = 0;
+    if (!PyArg_ParseTuple(args, "nnnnKniKKKKKKKKKdK|i", &P, &K, &F, &C, &fi_p, &degree,
                           &centered, &w_p, &b_p, &tr_p, &co_p, &obs_p, &ex_p, &lab_p, &cnt_p,
-                          &dims_p, &distance, &out_p))
+                          &dims_p, &distance, &out_p, &nearest))
         return NULL;
     if (F > MAX_FEATURES) {
         PyErr_SetString(PyExc_ValueError, "contains: at most 256 classifier features");
@@ -162,8 +186,9 @@ NATIVE_CLONES static PyObject *contains(PyObject *self, PyObject *args)
             fetch_first_examples(examples + t * C * OBS_DIM, labels + t * C);
         }
         Py_ssize_t s = pending[i], p = s / K;
-        out[s] = (uint8_t)near_positive(obs + p * OBS_DIM, examples + s * C * OBS_DIM,
-                                        labels + s * C, (long)count[s], dims, distance);
+        out[s] = (uint8_t)(nearest ? nearest_is_positive : near_positive)(
+            obs + p * OBS_DIM, examples + s * C * OBS_DIM, labels + s * C, (long)count[s], dims,
+            distance);
     }
     free(pending);
     Py_RETURN_NONE;

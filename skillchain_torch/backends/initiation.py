@@ -72,8 +72,10 @@ class Stores(NamedTuple):
 
 def contains(factors: Tensor, centered: bool, weight: Tensor, bias: Tensor,
              trained: Tensor, constrained: Tensor, obs: Tensor, examples: Tensor,
-             labels: Tensor, count: Tensor, dims: Tensor, distance: float) -> Tensor:  # fmt: skip
-    """``BoolTensor [P, K]``: the classifier's membership rule for ``obs [P, 4]``.
+             labels: Tensor, count: Tensor, dims: Tensor, distance: float,
+             nearest: bool = False) -> Tensor:  # fmt: skip
+    """``BoolTensor [P, K]``: the classifier's membership rule for ``obs [P, 4]`` (with
+    ``nearest``: ``constrain_nearest``'s).
 
     ``factors``: the ``factor_index`` of the classifier's :class:`~skillchain_torch.features.
     PolynomialFeatures` (computed here, with the same bits, of ``2 obs - 1`` if ``centered``);
@@ -86,7 +88,7 @@ def contains(factors: Tensor, centered: bool, weight: Tensor, bias: Tensor,
     _c.contains(P, K, F, examples.shape[2], factors.data_ptr(), factors.shape[1], centered,
                 weight.data_ptr(), bias.data_ptr(), trained.data_ptr(), constrained.data_ptr(),
                 obs.data_ptr(), examples.data_ptr(), labels.data_ptr(), count.data_ptr(),
-                dims.data_ptr(), float(distance), out.data_ptr())  # fmt: skip
+                dims.data_ptr(), float(distance), out.data_ptr(), int(nearest))  # fmt: skip
     return out
 
 

@@ -39,7 +39,8 @@ class ExampleStores:
 
     Reads the classifier's buffers ``examples [P, K, C, D]``, ``labels``, ``count``, ``seen``,
     ``generation``, ``seeds``, ``dirty`` and settings ``capacity``, ``replacement``,
-    ``keep_negatives``, ``store_failures``, ``distance``, ``distance_dims``, ``native``.
+    ``keep_negatives``, ``store_failures``, ``constrain_nearest``, ``distance``,
+    ``distance_dims``, ``native``.
     """
 
     @property
@@ -76,10 +77,38 @@ class ExampleStores:
         if positives.shape[0] > 0 and rows.numel() > 0:
             dims = list(self.distance_dims)
             near[rows] = within_any(points[rows][:, dims], positives[:, dims], self.distance)
-        return member & near
+        near = member & near
+        return self.nearest_points(agent, slot, points, near) if self.constrain_nearest else near
+
+    def _nearest_positive(self, points: Tensor, examples: Tensor, labels: Tensor,
+                          stored: Tensor) -> Tensor:  # fmt: skip
+        """``constrain_nearest``: no stored negative strictly nearer to each point than its
+        nearest stored positive. ``points [B, N, 4]``, ``examples [B, C, 4]``, ``labels`` and
+        ``stored [B, C]`` -> ``[B, N]``."""
+        if len(self.distance_dims) < self.obs_dim:
+            dims = list(self.distance_dims)
+            points, examples = points[..., dims], examples[..., dims]
+        distance = torch.cdist(points, examples, compute_mode="donot_use_mm_for_euclid_dist")
+        far = torch.full_like(distance, torch.inf)
+        positive = torch.where((stored & labels)[:, None, :], distance, far).amin(-1)
+        negative = torch.where((stored & ~labels)[:, None, :], distance, far).amin(-1)
+        return ~(negative < positive)
+
+    def nearest_points(self, agent: int, slot: int, points: Tensor, member: Tensor) -> Tensor:
+        """``member [N]`` narrowed by ``constrain_nearest`` (only where ``member`` holds)."""
+        count = int(self.count[agent, slot])
+        labels = self.labels[agent, slot, :count]
+        rows = member.nonzero().flatten()
+        if bool(labels.all()) or rows.numel() == 0:  # no stored failure: nothing changes
+            return member
+        stored = torch.ones_like(labels)
+        keep = self._nearest_positive(points[rows][None], self.examples[agent, slot, :count][None],
+                                      labels[None], stored[None])[0]  # fmt: skip
+        return member.index_put((rows,), keep)
 
     def near_positive(self, obs: Tensor, mask: Tensor | None = None) -> Tensor:
-        """``[P, K]``: within ``distance`` of at least one stored positive example.
+        """``[P, K]``: within ``distance`` of at least one stored positive example (with
+        ``constrain_nearest``, and no stored negative nearer than the nearest positive).
 
         Only the slots in ``mask [P, K]`` (default all) are checked; others read False.
         """
@@ -97,6 +126,12 @@ class ExampleStores:
         d = self.obs_dim
         within = self._within(point.reshape(-1, 1, d), examples.reshape(-1, self.capacity, d))
         near = (within.reshape(stored.shape) & stored & labels).any(-1)
+        if self.constrain_nearest:  # ... and no stored failure nearer than that positive
+            shape = stored.shape
+            near = near & self._nearest_positive(
+                point.reshape(-1, 1, d), examples.reshape(-1, self.capacity, d),
+                labels.reshape(-1, self.capacity), stored.reshape(-1, self.capacity),
+            )[:, 0].reshape(shape[:-1])
         if bool(mask.all()):
             return near
         out = torch.zeros_like(self.trained)

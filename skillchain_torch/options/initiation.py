@@ -60,10 +60,10 @@ class InitiationClassifier(ExampleStores, nn.Module):
             negative, so a plain reservoir soon holds one or two failures (measured: 499
             positives and 1 negative after 40 episodes) and the set cannot shrink where the
             option fails; the paper's classifier sees every example.
-        store_failures: a full store never rejects a *negative*: it replaces a stored
-            positive (:func:`~.examples.failure_place`). A reservoir keeps the ``n``-th example
-            with probability ``C / (n + 1)``, about 2% late in a run: the set stops shrinking
-            where its option fails, while the paper's classifier sees every example.
+        store_failures: a full store never rejects a *negative* (it replaces a positive,
+            :func:`~.examples.failure_place`); a reservoir keeps about 2% late in a run.
+        constrain_nearest: the constraint also asks that no stored negative be nearer than
+            the nearest positive ("their start states were then removed from the set").
         balanced: weight the two classes equally in the loss (scikit-learn's
             ``class_weight="balanced"``): unweighted, a success's 250 positives outvote the
             single negative of each failure and the set stays wide where the option fails.
@@ -118,6 +118,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
         replacement: str = "reservoir",
         keep_negatives: bool = False,
         store_failures: bool = False,
+        constrain_nearest: bool = False,
         balanced: bool = False,
         initial_bias: float = 0.0,
         centered: bool = False,
@@ -140,17 +141,17 @@ class InitiationClassifier(ExampleStores, nn.Module):
         self.obs_dim = int(obs_dim)
         self.lr, self.sweeps, self.distance = float(lr), int(sweeps), float(distance)
         self.distance_dims, self.replacement = dims, replacement
-        self.balanced = bool(balanced)
-        self.keep_negatives = bool(keep_negatives)
-        self.store_failures = bool(store_failures)
+        self.balanced, self.keep_negatives = bool(balanced), bool(keep_negatives)
+        self.store_failures, self.constrain_nearest = bool(store_failures), bool(constrain_nearest)
         self.config: dict[str, Any] = dict(
             population=population, slots=slots, degree=degree, lr=self.lr, sweeps=self.sweeps,
             capacity=capacity, distance=self.distance, distance_dims=list(dims),
             replacement=replacement, keep_negatives=self.keep_negatives, balanced=self.balanced,
             initial_bias=float(initial_bias), centered=bool(centered), dtype=dtype_name(dtype),
         )  # fmt: skip
-        if self.store_failures:  # (files saved before it keep their config as it was)
-            self.config["store_failures"] = True
+        for name in ("store_failures", "constrain_nearest"):  # (older files: as they were)
+            if getattr(self, name):
+                self.config[name] = True
         if self.obs_dim != OBS_DIM:  # (Pinball's files keep their config as it was)
             self.config["obs_dim"] = self.obs_dim
         self.initial_bias, self.centered = float(initial_bias), bool(centered)
@@ -170,8 +171,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
         for name in ("trained", "constrained", "dirty"):
             self.register_buffer(name, zeros(pk, dtype=torch.bool, device=device))
         self.register_buffer("seeds", agent_seeds(seed, population).to(device))
-        # The compiled membership and fits (set_native); a run-time choice, not configuration.
-        self.native = False
+        self.native = False  # the compiled membership and fits (set_native): a run-time choice
 
     def set_native(self, native: bool | None = None) -> bool:
         """Use the compiled :func:`contains` and fits (:mod:`~skillchain_torch.backends.
@@ -249,7 +249,7 @@ class InitiationClassifier(ExampleStores, nn.Module):
             return backend.contains(
                 self.features.factor_index, self.centered, self.weight, self.bias, self.trained,
                 self.constrained, obs, self.examples, self.labels, self.count, self._dims,
-                self.distance)
+                self.distance, self.constrain_nearest)
         member = (self.logit(obs) > 0) | ~self.trained
         # The distance test (C stored examples per slot) only where the logit said yes.
         check = self.constrained & member

@@ -30,6 +30,7 @@ def built_values(agent: SkillChainingAgent) -> dict:
         degree=clf["degree"], lr=clf["lr"], sweeps=clf["sweeps"], distance=clf["distance"],
         capacity=clf["capacity"], balanced=clf["balanced"],
         keep_negatives=clf["keep_negatives"], store_failures=agent.bank.classifier.store_failures,
+        constrain_nearest=agent.bank.classifier.constrain_nearest,
         initiation_bias=clf["initial_bias"],
         initiation_centered=clf["centered"],
         gestation_positives=d.reading.gestation_positives, initiation_start=d.reading.start,

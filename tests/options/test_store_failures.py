@@ -94,7 +94,8 @@ def test_the_flag_reaches_the_classifier(tmp_path):
     built = SkillChainingAgent.build(population=1, slots=2, order=1)
     assert not built.bank.classifier.store_failures  # the default preset's reading
     out = tmp_path / "run"
-    assert main(["train", "--agent", "skill-chaining", "--store-failures", "on", "--runs", "1",
-                 "--episodes", "1",
+    assert main(["train", "--agent", "skill-chaining", "--store-failures", "on",
+                 "--constrain-nearest", "on", "--runs", "1", "--episodes", "1",
                  "--max-episode-steps", "50", "--quiet", "--out", str(out)]) == 0
-    assert json.loads((out / "config.json").read_text())["store_failures"] is True
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["store_failures"] is True and saved["constrain_nearest"] is True
