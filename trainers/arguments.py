@@ -18,6 +18,7 @@ from pathlib import Path
 from skillchain_torch.presets import DEFAULT, PAPER, PRESET_NAMES
 
 from .agents import AGENTS
+from .arguments_neural import NEURAL_OPTIONS, add_neural_arguments
 
 __all__ = ["build_parser", "CONFIG_OPTIONS"]
 
@@ -29,8 +30,8 @@ CONFIG_OPTIONS = (
     "initiation_start", "initiation_constrain", "one_class_fits", "failure_bootstrap",
     "keep_negatives", "store_failures", "constrain_nearest", "intra_option_primitives",
     "intra_option_target", "option_interruption", "policy_start", "value_start", "value_bonus",
-    "option_alpha", "completion_reward", "gestation", "convergence_threshold", "top_head",
-    "option_head", "initiation", "max_branching",
+    "option_alpha", "completion_reward", "gestation", "convergence_threshold", "max_branching",
+    *NEURAL_OPTIONS,
 )  # fmt: skip
 
 
@@ -64,11 +65,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="the observation's bounds, one LOW:HIGH per dim, where the env's spec has none "
         "(Fourier features and initiation sets live in the unit box)",
     )
-    for flag, paper in (("--top-head", "fourier"), ("--option-head", "fourier"),
-                        ("--initiation", "logistic")):  # fmt: skip
-        train.add_argument(flag, default=None, metavar="NAME",
-                           help=f"skill chaining's piece: {paper} (the paper's, default) or mlp "
-                           "(neural; skillchain_torch.agents.pieces)")  # fmt: skip
+    add_neural_arguments(train)
     train.add_argument("--max-branching", type=int, default=None, help="options per target "
                        "event (paper and default: 3; 0: none, a flat baseline for any head)")
     train.add_argument("--runs", type=int, default=None, help="P, independent agents (default 1)")

@@ -27,12 +27,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
-import numbers
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from skillchain_torch.agents.pieces import TOP_LEARNER
 from skillchain_torch.discovery.readings import InitiationReading
 from skillchain_torch.presets import (
     PRESET_FIELDS,
@@ -43,12 +42,12 @@ from skillchain_torch.presets import (
 from skillchain_torch.resources import available_memory
 
 from .config_checks import (
+    INT64_MAX,
     ConfigError,
     check_device,
     check_memory,
+    check_values,
     memory_estimate,
-    short,
-    type_problem,
 )
 from .config_fields import LABEL_FIELDS, LEGACY_FIELDS, RESUME_FIELDS, UNREAD_FIELDS
 
@@ -60,9 +59,6 @@ def paper_defaults(map_name: str) -> tuple[int, float]:
     return instance_defaults(map_name)
 
 
-# Integer fields are stored in int64 tensors and arrays; agent p's random streams are keyed by
-# the int64 seed + p (CounterRNG, the initiation-set reservoirs, the environment's starts).
-INT64_MAX = 2**63 - 1
 # Memory a run needs besides its largest arrays (torch, the interpreter, buffers).
 _BASE_BYTES = 256 * 2**20
 
@@ -140,6 +136,13 @@ class TrainConfig:
         top_head, option_head, initiation: the skill-chaining agent's pieces by name
             (:mod:`skillchain_torch.agents.pieces`): the paper's ``"fourier"``, ``"fourier"``,
             ``"logistic"``, or ``"mlp"`` for each (neural).
+        top_lr, top_target_update, top_bootstrap: the ``"mlp"`` top level's learner: Adam's
+            step size, optimizer steps between target copies, ``"max"`` (DQN's target) or
+            ``"sarsa"`` (:data:`~skillchain_torch.agents.pieces.TOP_LEARNER`).
+        epsilon_init, annealing_steps: skill chaining's top level explores at ``epsilon_init``
+            at its first step, annealed linearly to ``epsilon`` over ``annealing_steps`` agent
+            steps (:class:`~skillchain_torch.policies.LinearEpsilon`); ``None``: ``epsilon``
+            throughout, as the paper.
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
         device: torch device of the run.
@@ -191,6 +194,11 @@ class TrainConfig:
     top_head: str = "fourier"
     option_head: str = "fourier"
     initiation: str = "logistic"
+    top_lr: float = TOP_LEARNER["lr"]
+    top_target_update: int = TOP_LEARNER["target_update"]
+    top_bootstrap: str = TOP_LEARNER["bootstrap"]
+    epsilon_init: float | None = None
+    annealing_steps: int = 0
 
     def __post_init__(self):
         # Fill what the config leaves open from its preset, so every reader sees values.
@@ -241,110 +249,7 @@ class TrainConfig:
         here, and, with ``memory``, that the run's largest arrays (:meth:`memory_estimate`)
         fit in the memory available now.
         """
-        from skillchain_torch.agents.hierarchical import FAILURE_BOOTSTRAPS
-        from skillchain_torch.agents.pieces import INITIATIONS, OPTION_HEADS, TOP_HEADS
-        from skillchain_torch.discovery.gestation import POLICY_STARTS, VALUE_STARTS
-        from skillchain_torch.envs.pinball import MAP_NAMES
-        from skillchain_torch.trainers.agents import AGENTS
-
-        preset = preset_named(self.preset)
-        for field in dataclasses.fields(self):
-            value, kind = getattr(self, field.name), str(field.type)
-            if (field.name in PRESET_CONFIG_FIELDS and getattr(preset, field.name) is not None
-                    and not (value is None and self._per_env(field.name))):  # fmt: skip
-                kind = kind.replace(" | None", "")  # None was the preset's value, filled in
-            what = type_problem(kind, value)
-            if what is not None:
-                raise ConfigError(f"{field.name} must be {what}, got {short(value)}",
-                                  (field.name,))
-        if self.agent not in AGENTS:
-            raise ConfigError(f"agent must be one of {', '.join(AGENTS)}, got {self.agent!r}",
-                              ("agent",))
-        if self.env is None and self.map not in MAP_NAMES:
-            raise ConfigError(f"unknown map {self.map!r}; known maps: {', '.join(MAP_NAMES)}")
-        checks = [
-            ("runs", self.runs, self.runs >= 1, ">= 1"),
-            ("episodes", self.episodes, self.episodes >= 1, ">= 1"),
-            ("epsilon", self.epsilon, 0.0 <= self.epsilon <= 1.0, "in [0, 1]"),
-            ("gamma", self.gamma, 0.0 <= self.gamma <= 1.0, "in [0, 1]"),
-            ("checkpoint_every", self.checkpoint_every, self.checkpoint_every >= 0, ">= 0"),
-            ("slots", self.slots, self.slots >= 1, ">= 1"),
-            ("initiation_bias", self.initiation_bias, math.isfinite(self.initiation_bias),
-             "finite"),
-            ("failure_bootstrap", repr(self.failure_bootstrap),
-             self.failure_bootstrap in FAILURE_BOOTSTRAPS,
-             f"one of {', '.join(FAILURE_BOOTSTRAPS)}"),
-            ("value_bonus", self.value_bonus, math.isfinite(self.value_bonus), "finite"),
-            ("gestation", self.gestation, 0 <= self.gestation <= 1_000_000, "in [0, 10^6]"),
-            ("max_branching", self.max_branching, self.max_branching >= 0, ">= 0"),
-            ("convergence_threshold", self.convergence_threshold,
-             math.isfinite(self.convergence_threshold) and self.convergence_threshold > 0,
-             "finite and > 0"),
-            ("option_alpha", self.option_alpha, self.option_alpha is None  # (resolved later)
-             or (math.isfinite(self.option_alpha) and self.option_alpha >= 0), ">= 0 and finite"),
-            ("completion_reward", self.completion_reward,
-             math.isfinite(self.completion_reward), "finite"),
-            ("value_start", repr(self.value_start), self.value_start in VALUE_STARTS,
-             f"one of {', '.join(VALUE_STARTS)}"),
-            ("policy_start", repr(self.policy_start), self.policy_start in POLICY_STARTS,
-             f"one of {', '.join(POLICY_STARTS)}"),
-            *((name, repr(getattr(self, name)), getattr(self, name) in known,
-               f"one of {', '.join(sorted(known))}") for name, known in (
-                ("top_head", TOP_HEADS), ("option_head", OPTION_HEADS),
-                ("initiation", INITIATIONS))),
-        ]
-        if self.agent == "skill-chaining" and self.top_head != "fourier" and (
-                self.policy_start != "zero" or self.value_start == "agent"):  # fmt: skip
-            raise ConfigError(f"top_head {self.top_head!r} needs policy_start 'zero' and a "
-                              f"value_start other than 'agent' (they read the linear head), got "
-                              f"{self.policy_start!r} and {self.value_start!r}: add --preset "
-                              "paper", ("top_head", "policy_start", "value_start"))  # fmt: skip
-        if self.options_agent is not None:
-            checks.append(("options_agent", self.options_agent, self.options_agent >= 0, ">= 0"))
-        if self.alpha is not None:
-            ok = math.isfinite(self.alpha) and self.alpha > 0
-            checks.append(("alpha", self.alpha, ok, "> 0 and finite"))
-        if self.order is not None:
-            checks.append(("order", self.order, self.order >= 0, ">= 0"))
-        if self.max_episode_steps is not None:
-            checks.append(
-                ("max_episode_steps", self.max_episode_steps, self.max_episode_steps >= 1, ">= 1")
-            )
-        if self.agent == "given-options":
-            if self.options is None:
-                raise ConfigError(
-                    "agent 'given-options' needs options: an OptionBank file (--options)",
-                    ("options",),
-                )
-            if not Path(self.options).is_file():
-                raise ConfigError(f"options file {self.options!r} does not exist", ("options",))
-        for name, value, ok, rule in checks:
-            if not ok:
-                raise ConfigError(f"{name} must be {rule}, got {value}", (name,))
-        for field in dataclasses.fields(self):
-            value = getattr(self, field.name)
-            if (field.name != "seed" and isinstance(value, numbers.Integral)
-                    and not isinstance(value, bool) and value > INT64_MAX):
-                raise ConfigError(f"{field.name} must be at most 2^63 - 1 = {INT64_MAX} (an "
-                                  f"int64), got {value}", (field.name,))  # fmt: skip
-        if not 0 <= self.seed <= INT64_MAX - (self.runs - 1):
-            raise ConfigError(
-                f"seed must be in [0, {INT64_MAX - (self.runs - 1)}] (agent p uses seed + p, "
-                f"an int64 random-stream key, p < runs = {self.runs}), got {self.seed}",
-                ("seed",),
-            )
-        try:
-            reading = self.reading
-        except ValueError as err:
-            message = str(err).replace("reading start", "initiation_start").replace(
-                "reading constrain", "initiation_constrain").replace(
-                "reading gestation_positives", "gestation_positives")
-            fields = tuple(n for n in ("initiation_start", "initiation_constrain",
-                                       "gestation_positives", "one_class_fits") if n in message)
-            raise ConfigError(message, fields) from None
-        if reading.start == "biased" and not self.initiation_bias > 0:
-            raise ConfigError(f"initiation_start 'biased' needs initiation_bias > 0, got "
-                              f"{self.initiation_bias}", ("initiation_start", "initiation_bias"))
+        check_values(self)
         check_device(self.device)
         if memory:
             check_memory(self, available_memory, _BASE_BYTES)  # (tests patch the reader here)

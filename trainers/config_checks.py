@@ -10,15 +10,23 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import numbers
 import os
+from pathlib import Path
 from typing import Any
 
+from skillchain_torch.presets import PRESET_FIELDS, preset_named
 from skillchain_torch.resources import device_problem
 from skillchain_torch.resources import format_bytes as _size
 
-__all__ = ["ConfigError", "short", "type_problem", "check_device", "check_memory",
-           "memory_estimate"]
+__all__ = ["ConfigError", "short", "type_problem", "check_values", "check_device",
+           "check_memory", "memory_estimate", "INT64_MAX"]
+
+# Integer fields are stored in int64 tensors and arrays; agent p's random streams are keyed by
+# the int64 seed + p (CounterRNG, the initiation-set reservoirs, the environment's starts).
+INT64_MAX = 2**63 - 1
 
 
 class ConfigError(ValueError):
@@ -122,3 +130,124 @@ def check_memory(config, available_memory, base_bytes: int) -> None:
         raise ConfigError(
             f"the run needs an estimated {_size(need)} of {where} for {named} ({what}: "
             f"{_size(size)}), more than the {_size(have)} available", fields)
+
+
+def check_values(config) -> None:
+    """Raise :class:`ConfigError` naming the first field of ``config`` (a
+    :class:`~.config.TrainConfig`) whose type or value is impossible: each field's type, its
+    range (integers fit int64; agent p's seed ``seed + p`` is in [0, 2^63 - 1]), names that must
+    be known, and the combinations that cannot run."""
+    from skillchain_torch.agents.hierarchical import FAILURE_BOOTSTRAPS
+    from skillchain_torch.agents.pieces import INITIATIONS, OPTION_HEADS, TOP_HEADS
+    from skillchain_torch.discovery.gestation import POLICY_STARTS, VALUE_STARTS
+    from skillchain_torch.envs.pinball import MAP_NAMES
+    from skillchain_torch.trainers.agents import AGENTS
+
+    preset = preset_named(config.preset)
+    for field in dataclasses.fields(config):
+        value, kind = getattr(config, field.name), str(field.type)
+        if (field.name in PRESET_FIELDS and getattr(preset, field.name) is not None
+                and not (value is None and config._per_env(field.name))):  # fmt: skip
+            kind = kind.replace(" | None", "")  # None was the preset's value, filled in
+        what = type_problem(kind, value)
+        if what is not None:
+            raise ConfigError(f"{field.name} must be {what}, got {short(value)}",
+                              (field.name,))
+    if config.agent not in AGENTS:
+        raise ConfigError(f"agent must be one of {', '.join(AGENTS)}, got {config.agent!r}",
+                          ("agent",))
+    if config.env is None and config.map not in MAP_NAMES:
+        raise ConfigError(f"unknown map {config.map!r}; known maps: {', '.join(MAP_NAMES)}")
+    checks = [
+        ("runs", config.runs, config.runs >= 1, ">= 1"),
+        ("episodes", config.episodes, config.episodes >= 1, ">= 1"),
+        ("epsilon", config.epsilon, 0.0 <= config.epsilon <= 1.0, "in [0, 1]"),
+        ("gamma", config.gamma, 0.0 <= config.gamma <= 1.0, "in [0, 1]"),
+        ("checkpoint_every", config.checkpoint_every, config.checkpoint_every >= 0, ">= 0"),
+        ("slots", config.slots, config.slots >= 1, ">= 1"),
+        ("initiation_bias", config.initiation_bias, math.isfinite(config.initiation_bias),
+         "finite"),
+        ("failure_bootstrap", repr(config.failure_bootstrap),
+         config.failure_bootstrap in FAILURE_BOOTSTRAPS,
+         f"one of {', '.join(FAILURE_BOOTSTRAPS)}"),
+        ("value_bonus", config.value_bonus, math.isfinite(config.value_bonus), "finite"),
+        ("gestation", config.gestation, 0 <= config.gestation <= 1_000_000, "in [0, 10^6]"),
+        ("max_branching", config.max_branching, config.max_branching >= 0, ">= 0"),
+        ("convergence_threshold", config.convergence_threshold,
+         math.isfinite(config.convergence_threshold) and config.convergence_threshold > 0,
+         "finite and > 0"),
+        ("option_alpha", config.option_alpha, config.option_alpha is None  # (resolved later)
+         or (math.isfinite(config.option_alpha) and config.option_alpha >= 0), ">= 0 and finite"),
+        ("completion_reward", config.completion_reward,
+         math.isfinite(config.completion_reward), "finite"),
+        ("value_start", repr(config.value_start), config.value_start in VALUE_STARTS,
+         f"one of {', '.join(VALUE_STARTS)}"),
+        ("policy_start", repr(config.policy_start), config.policy_start in POLICY_STARTS,
+         f"one of {', '.join(POLICY_STARTS)}"),
+        ("top_lr", config.top_lr, math.isfinite(config.top_lr) and config.top_lr > 0,
+         "> 0 and finite"),
+        ("top_target_update", config.top_target_update, config.top_target_update >= 1, ">= 1"),
+        ("top_bootstrap", repr(config.top_bootstrap), config.top_bootstrap in ("max", "sarsa"),
+         "one of max, sarsa"),
+        ("epsilon_init", config.epsilon_init, config.epsilon_init is None
+         or 0.0 <= config.epsilon_init <= 1.0, "in [0, 1]"),
+        ("annealing_steps", config.annealing_steps, config.annealing_steps >= 0
+         and (config.annealing_steps >= 1 or config.epsilon_init is None),
+         ">= 1 with epsilon_init (>= 0 without)"),
+        *((name, repr(getattr(config, name)), getattr(config, name) in known,
+           f"one of {', '.join(sorted(known))}") for name, known in (
+            ("top_head", TOP_HEADS), ("option_head", OPTION_HEADS),
+            ("initiation", INITIATIONS))),
+    ]
+    if config.agent == "skill-chaining" and config.top_head != "fourier" and (
+            config.policy_start != "zero" or config.value_start == "agent"):  # fmt: skip
+        raise ConfigError(f"top_head {config.top_head!r} needs policy_start 'zero' and a "
+                          f"value_start other than 'agent' (they read the linear head), got "
+                          f"{config.policy_start!r} and {config.value_start!r}: add --preset "
+                          "paper", ("top_head", "policy_start", "value_start"))  # fmt: skip
+    if config.options_agent is not None:
+        checks.append(("options_agent", config.options_agent, config.options_agent >= 0, ">= 0"))
+    if config.alpha is not None:
+        ok = math.isfinite(config.alpha) and config.alpha > 0
+        checks.append(("alpha", config.alpha, ok, "> 0 and finite"))
+    if config.order is not None:
+        checks.append(("order", config.order, config.order >= 0, ">= 0"))
+    if config.max_episode_steps is not None:
+        checks.append(
+            ("max_episode_steps", config.max_episode_steps, config.max_episode_steps >= 1, ">= 1")
+        )
+    if config.agent == "given-options":
+        if config.options is None:
+            raise ConfigError(
+                "agent 'given-options' needs options: an OptionBank file (--options)",
+                ("options",),
+            )
+        if not Path(config.options).is_file():
+            raise ConfigError(f"options file {config.options!r} does not exist", ("options",))
+    for name, value, ok, rule in checks:
+        if not ok:
+            raise ConfigError(f"{name} must be {rule}, got {value}", (name,))
+    for field in dataclasses.fields(config):
+        value = getattr(config, field.name)
+        if (field.name != "seed" and isinstance(value, numbers.Integral)
+                and not isinstance(value, bool) and value > INT64_MAX):
+            raise ConfigError(f"{field.name} must be at most 2^63 - 1 = {INT64_MAX} (an "
+                              f"int64), got {value}", (field.name,))  # fmt: skip
+    if not 0 <= config.seed <= INT64_MAX - (config.runs - 1):
+        raise ConfigError(
+            f"seed must be in [0, {INT64_MAX - (config.runs - 1)}] (agent p uses seed + p, "
+            f"an int64 random-stream key, p < runs = {config.runs}), got {config.seed}",
+            ("seed",),
+        )
+    try:
+        reading = config.reading
+    except ValueError as err:
+        message = str(err).replace("reading start", "initiation_start").replace(
+            "reading constrain", "initiation_constrain").replace(
+            "reading gestation_positives", "gestation_positives")
+        fields = tuple(n for n in ("initiation_start", "initiation_constrain",
+                                   "gestation_positives", "one_class_fits") if n in message)
+        raise ConfigError(message, fields) from None
+    if reading.start == "biased" and not config.initiation_bias > 0:
+        raise ConfigError(f"initiation_start 'biased' needs initiation_bias > 0, got "
+                          f"{config.initiation_bias}", ("initiation_start", "initiation_bias"))

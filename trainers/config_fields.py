@@ -18,7 +18,8 @@ LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_neg
                  "store_failures": False, "constrain_nearest": False,
                  "option_interruption": False,
                  "top_head": "fourier", "option_head": "fourier", "initiation": "logistic",
-                 "max_branching": 3}
+                 "max_branching": 3, "top_lr": 1e-3, "top_target_update": 250,
+                 "top_bootstrap": "sarsa", "epsilon_init": None, "annealing_steps": 0}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
@@ -35,7 +36,8 @@ _DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestati
                      "value_start",
                      "value_bonus", "option_alpha", "gestation", "convergence_threshold",
                      "max_branching")
-_PIECES = ("top_head", "option_head", "initiation")
+_PIECES = ("top_head", "option_head", "initiation", "top_lr", "top_target_update",
+           "top_bootstrap", "epsilon_init", "annealing_steps")
 UNREAD_FIELDS = {
     "flat": _DISCOVERY_FIELDS + _PIECES + ("options", "options_agent", "failure_bootstrap",
                                            "completion_reward", "intra_option_primitives",

@@ -45,6 +45,7 @@ import torch
 from skillchain_torch.envs.external import make_env, read_specs
 from skillchain_torch.envs.pinball import PinballEnv
 from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
+from skillchain_torch.policies import LinearEpsilon
 
 from .agents import make_agent
 from .config import TrainConfig
@@ -159,6 +160,16 @@ class PopulationTrainer(DivergenceCheck):
         self._ops: dict[str, list[tuple[str, object]]] = {stage: [] for stage in STAGES}
         self._modules: dict[str, object] = {}
         self._pending_modules: dict[str, dict] = {}  # loaded before their module registered
+        # Skill chaining's top level may anneal its exploration (neural heads need it); agents
+        # step once per loop iteration while active, so the schedule reads global_step.
+        self._epsilon = (None if config.epsilon_init is None else LinearEpsilon(
+            config.epsilon_init, config.epsilon, config.annealing_steps))  # fmt: skip
+        self._anneal()
+
+    def _anneal(self) -> None:
+        """The top level's epsilon at ``global_step`` (where the config anneals it)."""
+        if self._epsilon is not None:
+            self.agent.epsilon = self._epsilon(self.global_step)
 
     # ------------------------------------------------------------------ hooks
     def register_op(self, stage: str, op, name: str | None = None) -> None:
@@ -236,6 +247,8 @@ class PopulationTrainer(DivergenceCheck):
             ret += reward
             self.global_step += 1
             self.agent_steps += n
+            if self._epsilon is not None:
+                agent.epsilon = self._epsilon(self.global_step)
             if ends is None:
                 action = agent.observe(obs, reward)
                 continue
@@ -360,6 +373,7 @@ class PopulationTrainer(DivergenceCheck):
         self.lengths = t["lengths"].numpy().copy()
         self.episodes_done = t["episodes_done"].numpy().copy()
         self.global_step = int(t["global_step"])
+        self._anneal()
         self.agent_steps = int(t["agent_steps"])
         self.elapsed = float(t["elapsed"])
         self.started = bool(t["started"])

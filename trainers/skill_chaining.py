@@ -39,9 +39,12 @@ class SkillChainingRunAgent(SkillChainingAgent):
         # The config's values over its preset's, built as SkillChainingAgent.build builds: so
         # build(preset=...) and the trainer's agent of the same values are the same agent.
         values = {name: getattr(cfg, name) for name in PRESET_CONFIG_FIELDS}
+        learner = (dict(lr=cfg.top_lr, target_update=cfg.top_target_update,
+                        bootstrap=cfg.top_bootstrap) if cfg.top_head == "mlp" else None)
         bank, arguments = SkillChainingAgent.build_arguments(
             cfg.runs, cfg.preset, seed=cfg.seed, device=device, map=cfg.map, native=native,
             obs_dim=cfg.obs_dim, num_actions=cfg.num_actions, top_head=cfg.top_head,
-            option_head=cfg.option_head, initiation=cfg.initiation, **values)  # fmt: skip
+            option_head=cfg.option_head, initiation=cfg.initiation, top_learner=learner,
+            **values)  # fmt: skip
         super().__init__(bank, **arguments)
         self.config = cfg

@@ -41,8 +41,8 @@ from skillchain_torch.modules import MLPQHead
 from skillchain_torch.objectives import OptionReplay, ReplayTD, SMDPSarsaLoss
 from skillchain_torch.options import MLPInitiationClassifier, MLPOptionQHead, OptionBank
 
-__all__ = ["INITIATIONS", "OPTION_HEADS", "TOP_HEADS", "assemble_bank", "register_piece",
-           "top_level_arguments"]
+__all__ = ["INITIATIONS", "OPTION_HEADS", "TOP_HEADS", "TOP_LEARNER", "assemble_bank",
+           "register_piece", "top_level_arguments"]
 
 # The neural defaults: sized for observations of a few dims and returns of order 10^4.
 VALUE_SCALE = 1000.0  # Q / 1000: outputs and TD errors of order 10 (Pinball's goal: 10^4)
@@ -53,15 +53,27 @@ def _first(seed) -> int:
     return int(seed.reshape(-1)[0]) if isinstance(seed, torch.Tensor) else int(seed)
 
 
+# The MLP top level's learner, screened on Acrobot-v1 (seeds 0-9, results/neural/README.md): a
+# target copied every 250 updates propagates a return of gamma = 1 back one step per copy, about
+# 25 copies in an agent's first 25,000 steps, and no neural agent learned. Older runs' values are
+# TrainConfig's LEGACY_FIELDS (lr 1e-3, 250, "sarsa").
+TOP_LEARNER = {"lr": 1e-4, "target_update": 25, "bootstrap": "max"}
+
+
 def _mlp_top(population: int, obs_dim: int, num_decisions: int, gamma: float, seed: int,
-             device) -> dict[str, Any]:  # fmt: skip
+             device, lr: float = TOP_LEARNER["lr"],
+             target_update: int = TOP_LEARNER["target_update"],
+             bootstrap: str = TOP_LEARNER["bootstrap"]) -> dict[str, Any]:  # fmt: skip
+    """An MLP top level learning by SMDP TD on replayed minibatches: ``bootstrap`` ``"max"``
+    (Q-learning over the available decisions, DQN's target) or ``"sarsa"`` (the decision taken
+    next, the paper's rule), Adam at ``lr``, the target copied every ``target_update`` updates."""
     head = MLPQHead(obs_dim, num_decisions, population, hidden=64, layers=2,
                     value_scale=VALUE_SCALE, seed=seed, device=device)  # fmt: skip
     loss = SMDPSarsaLoss(head, gamma, loss_function="smooth_l1", value_scale=VALUE_SCALE,
-                         delay_value=True)  # fmt: skip
-    optimizer = torch.optim.Adam(head.parameters(), lr=1e-3)
-    learner = ReplayTD(loss, optimizer, capacity=50_000, batch_size=32, target_update=250,
-                       train_every=4, seed=_first(seed))  # fmt: skip
+                         delay_value=True, bootstrap=bootstrap)  # fmt: skip
+    optimizer = torch.optim.Adam(head.parameters(), lr=lr)
+    learner = ReplayTD(loss, optimizer, capacity=50_000, batch_size=32,
+                       target_update=target_update, train_every=4, seed=_first(seed))  # fmt: skip
     return {"q_head": head, "features": nn.Identity(), "top_learner": learner}
 
 
@@ -125,9 +137,12 @@ def assemble_bank(bank: OptionBank, option_head: str = "fourier",
 
 
 def top_level_arguments(top_head: str, population: int, obs_dim: int, num_decisions: int,
-                        gamma: float = 1.0, seed=0, device=None) -> dict[str, Any]:  # fmt: skip
-    """The agent's keyword arguments for the named top level (``{}`` for the paper's)."""
+                        gamma: float = 1.0, seed=0, device=None,
+                        learner: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
+    """The agent's keyword arguments for the named top level (``{}`` for the paper's);
+    ``learner``: keyword arguments of its builder's learner (the built-in ``"mlp"`` reads
+    ``lr``, ``target_update`` and ``bootstrap``; :data:`TOP_LEARNER` by default)."""
     build = _lookup("top_head", top_head)
     if build is None:
         return {}
-    return build(population, obs_dim, num_decisions, gamma, seed, device)
+    return build(population, obs_dim, num_decisions, gamma, seed, device, **(learner or {}))

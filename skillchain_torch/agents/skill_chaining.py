@@ -137,7 +137,9 @@ class SkillChainingAgent(HierarchicalAgent):
                 ``gestation``, ``option_alpha``, ``balanced``, ...) overrides the preset's
                 value; ``top_head``, ``option_head``, ``initiation`` name the pieces
                 (:mod:`~skillchain_torch.agents.pieces`: the paper's ``"fourier"``,
-                ``"fourier"``, ``"logistic"`` by default, or ``"mlp"``); the rest go to the
+                ``"fourier"``, ``"logistic"`` by default, or ``"mlp"``); ``top_learner`` (a dict)
+                goes to the top-level piece's builder (``"mlp"``: ``lr``, ``target_update``,
+                ``bootstrap``); the rest go to the
                 constructor (``events``, ``native``, ``reading``, ...) and win over the preset.
 
         Example:
@@ -163,6 +165,7 @@ class SkillChainingAgent(HierarchicalAgent):
         names = {k: kwargs.pop(k, d) for k, d in (("top_head", "fourier"),
                                                   ("option_head", "fourier"),
                                                   ("initiation", "logistic"))}  # fmt: skip
+        learner = kwargs.pop("top_learner", None)
         # The env's sizes (its specs; None: Pinball's 4 and 5).
         sizes = {k: v for k in ("obs_dim", "num_actions") if (v := kwargs.pop(k, None)) is not None}
         p = preset_named(preset).replace(**fields)
@@ -181,7 +184,8 @@ class SkillChainingAgent(HierarchicalAgent):
                                 centered=p.initiation_centered, **sizes)  # fmt: skip
         bank = assemble_bank(bank, names["option_head"], names["initiation"], seed=seed)
         top = top_level_arguments(names["top_head"], population, bank.obs_dim,
-                                  bank.num_actions + p.slots, p.gamma, seed, device)  # fmt: skip
+                                  bank.num_actions + p.slots, p.gamma, seed, device,
+                                  learner)  # fmt: skip
         reading = InitiationReading(p.gestation_positives, p.initiation_start,
                                     p.initiation_constrain, p.one_class_fits)  # fmt: skip
         arguments = dict(

@@ -6,5 +6,7 @@ from skillchain_torch.policies.epsilon_greedy import (
     EpsilonGreedyModule,
     epsilon_greedy,
 )
+from skillchain_torch.policies.epsilon_schedule import LinearEpsilon
 
-__all__ = ["NUM_UNIFORMS", "EpsilonGreedy", "EpsilonGreedyModule", "epsilon_greedy"]
+__all__ = ["NUM_UNIFORMS", "EpsilonGreedy", "EpsilonGreedyModule", "epsilon_greedy",
+           "LinearEpsilon"]
