@@ -144,5 +144,8 @@ def top_level_arguments(top_head: str, population: int, obs_dim: int, num_decisi
     ``lr``, ``target_update`` and ``bootstrap``; :data:`TOP_LEARNER` by default)."""
     build = _lookup("top_head", top_head)
     if build is None:
+        if learner:
+            raise ValueError(f"top_learner {sorted(learner)} is for a top level with a learner of "
+                             f"its own; {top_head!r} learns by closed-form Sarsa")  # fmt: skip
         return {}
     return build(population, obs_dim, num_decisions, gamma, seed, device, **(learner or {}))

@@ -100,6 +100,11 @@ def test_the_mlp_top_level_takes_its_learner_settings():
     assert default.loss.bootstrap == TOP_LEARNER["bootstrap"]
 
 
+def test_the_linear_top_level_refuses_a_learner():
+    with pytest.raises(ValueError, match="closed-form Sarsa"):
+        top_level_arguments("fourier", 2, 4, 7, learner=dict(lr=1e-3))
+
+
 def test_the_trainer_s_agent_reads_the_config_s_learner():
     cfg = TrainConfig(agent="skill-chaining", runs=2, top_head="mlp", preset="paper",
                       top_lr=2e-4, top_target_update=9, top_bootstrap="sarsa")  # fmt: skip
