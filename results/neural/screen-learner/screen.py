@@ -9,37 +9,60 @@ built-in MLP top level's learner as it was then: TU (target copies every TU upda
 LR (Adam, then 1e-3), TE (an update every TE steps, 4), BOOT (sarsa or max), GAMMA (1).
 ``table.py`` prints the table in results/neural/README.md.
 """
-import sys, time, json, numpy as np, torch
-from trainers.config import TrainConfig
-from trainers.population import PopulationTrainer
+
 import os
+import sys
+import time
+
+import numpy as np
+
 import skillchain_torch.agents.pieces as pieces
-_orig = pieces.ReplayTD
-TU = int(os.environ.get("TU", "250")); LR = float(os.environ.get("LR", "1e-3")); TE = int(os.environ.get("TE", "4"))
-def _patched(loss, optimizer, **kw):
-    kw["target_update"] = TU; kw["train_every"] = TE
-    for g in optimizer.param_groups: g["lr"] = LR
-    return _orig(loss, optimizer, **kw)
-pieces.ReplayTD = _patched
-_origL = pieces.SMDPSarsaLoss
+from skillchain_torch.trainers.config import TrainConfig
+from skillchain_torch.trainers.population import PopulationTrainer
+
+TU = int(os.environ.get("TU", "250"))
+LR = float(os.environ.get("LR", "1e-3"))
+TE = int(os.environ.get("TE", "4"))
 BOOT = os.environ.get("BOOT", "sarsa")
-def _patchedL(*a, **kw):
+GAMMA = float(os.environ.get("GAMMA", "1.0"))
+_replay, _loss = pieces.ReplayTD, pieces.SMDPSarsaLoss
+
+
+def _patched_replay(loss, optimizer, **kw):
+    kw["target_update"], kw["train_every"] = TU, TE
+    for group in optimizer.param_groups:
+        group["lr"] = LR
+    return _replay(loss, optimizer, **kw)
+
+
+def _patched_loss(*args, **kw):
     kw["bootstrap"] = BOOT
-    return _origL(*a, **kw)
-pieces.SMDPSarsaLoss = _patchedL
-env, branching, episodes, eps0, eps1, decay_ep, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5]), float(sys.argv[6]), sys.argv[7]
-cfg = TrainConfig(agent="skill-chaining", preset="paper", env=f"gymnasium:{env}", runs=10, episodes=episodes, seed=0,
-                  max_branching=branching, gamma=float(os.environ.get("GAMMA", "1.0")), top_head="mlp", option_head="mlp", initiation="mlp")
-tr = PopulationTrainer(cfg, out_dir=None)
-def sched(trainer, batch=None):
-    done = float(trainer.episodes_done.mean())
-    trainer.agent.epsilon = eps1 + (eps0 - eps1) * max(0.0, 1 - done / decay_ep)
-sched(tr)
-tr.register_op("post_episodes", sched)
-t = time.time(); tr.train(); w = time.time() - t
-r = tr.returns
-np.save(out + ".npy", r)
-for a, b in [(0, 10), (10, 25), (25, 50), (50, 60), (50, 75), (75, 100)]:
-    if b <= r.shape[1]:
-        m = r[:, a:b].mean(1); print(f"{a+1}-{b}: {m.mean():.1f} ± {1.96*m.std(ddof=1)/np.sqrt(len(m)):.1f}")
-print("wall", round(w), "steps", tr.agent_steps, "opts", getattr(tr, "n_options", None))
+    return _loss(*args, **kw)
+
+
+pieces.ReplayTD, pieces.SMDPSarsaLoss = _patched_replay, _patched_loss
+
+
+def main() -> None:
+    env, branching, episodes = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+    eps0, eps1, decay_episodes = float(sys.argv[4]), float(sys.argv[5]), float(sys.argv[6])
+    out = sys.argv[7]
+    cfg = TrainConfig(agent="skill-chaining", preset="paper", env=f"gymnasium:{env}", runs=10,
+                      episodes=episodes, seed=0, max_branching=branching, gamma=GAMMA,
+                      top_head="mlp", option_head="mlp", initiation="mlp")  # fmt: skip
+    trainer = PopulationTrainer(cfg, out_dir=None)
+
+    def anneal(trainer, batch=None):
+        done = float(trainer.episodes_done.mean())
+        trainer.agent.epsilon = eps1 + (eps0 - eps1) * max(0.0, 1 - done / decay_episodes)
+
+    anneal(trainer)
+    trainer.register_op("post_episodes", anneal)
+    start = time.time()
+    trainer.train()
+    np.save(out + ".npy", trainer.returns)
+    print("wall", round(time.time() - start), "agent steps", trainer.agent_steps)
+
+
+if __name__ == "__main__":
+    main()

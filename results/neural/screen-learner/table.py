@@ -3,6 +3,7 @@
 from pathlib import Path
 
 import numpy as np
+
 from skillchain_torch.trainers.study.intervals import t_quantile
 
 HERE = Path(__file__).resolve().parent

@@ -1,0 +1,58 @@
+"""Pinball's neural runs (seeds 1000-1009) against the paper study's first 10 agents of the
+same seeds (``results/paper/simple``: flat and the default's skill chaining, agents 0-9 are
+seeds 1000-1009 by the seed contract). Prints the README's table; 95% Student-t intervals over
+runs, Welch for differences.
+
+    python results/neural/pinball_simple_single-1000/table.py
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
+
+HERE = Path(__file__).resolve().parent
+PAPER = HERE.parents[1] / "paper" / "simple"
+WINDOWS = [(1, 10), (11, 20), (21, 30)]
+
+
+def runs() -> dict[str, dict[str, np.ndarray]]:
+    out = {"flat (linear)": {"returns": np.load(PAPER / "flat" / "returns.npy")[:10]},
+           "sc-linear (default)": {
+               "returns": np.load(PAPER / "skill-chaining" / "returns.npy")[:10]}}
+    for name in ("flat-neural", "sc-neural"):
+        folder = HERE / name
+        if (folder / "returns.npy").exists():
+            out[name] = {k: np.load(folder / f"{k}.npy") for k in ("returns", "n_options",
+                                                                   "option_outcomes")}
+    return out
+
+
+def main() -> None:
+    data = runs()
+    print("| variant | " + " | ".join(f"{a}-{b}" for a, b in WINDOWS) + " | options at the end "
+          "| executions, last 10 episodes: success / timeout |")
+    print("|---|" + "---|" * (len(WINDOWS) + 2))
+    for name, r in data.items():
+        ret = r["returns"]
+        cells = [f"{m:,.0f} ± {h:,.0f}" if b <= ret.shape[1] else "" for (a, b) in WINDOWS
+                 for m, h in [mean_ci(ret[:, a - 1:b].mean(1)) if b <= ret.shape[1] else (0, 0)]]
+        opts = execs = ""
+        if "n_options" in r and r["n_options"][:, -1].max() > 0:
+            opts = f"{r['n_options'][:, -1].mean():.1f} (max {r['n_options'][:, -1].max()})"
+            o = r["option_outcomes"][:, -10:].sum((0, 1))
+            n = int(o.sum())
+            execs = f"{o[0] / n:.2f} / {o[1] / n:.2f} (n = {n:,})" if n else "none"
+        print(f"| {name} | " + " | ".join(cells) + f" | {opts} | {execs} |")
+    if "sc-neural" in data and "flat-neural" in data:
+        a, b = data["sc-neural"]["returns"], data["flat-neural"]["returns"]
+        e = min(a.shape[1], b.shape[1])
+        for lo, hi in WINDOWS:
+            if hi <= e:
+                m, h = diff_ci(a[:, lo - 1:hi].mean(1), b[:, lo - 1:hi].mean(1))
+                print(f"sc-neural - flat-neural, {lo}-{hi}: {m:+,.0f} ± {h:,.0f}")
+
+
+if __name__ == "__main__":
+    main()
