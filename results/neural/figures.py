@@ -52,7 +52,8 @@ def initiation_sets(run: Path, agent: int | None = None, limit: int = 8, dims=(0
     if not slots or len(points) == 0:
         return
     i, j = dims
-    fig, axes = plt.subplots(1, len(slots), figsize=(2.6 * len(slots), 2.8), squeeze=False)
+    fig, axes = plt.subplots(1, len(slots), figsize=(max(2.6 * len(slots), 7.5), 2.8),
+                             squeeze=False)  # (wide enough for the title)
     for ax, k in zip(axes[0], slots):
         inside = clf.contains_points(agent, k, points).numpy()
         xy = points.numpy()
