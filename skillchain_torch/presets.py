@@ -49,7 +49,14 @@ from typing import Any
 
 __all__ = ["Preset", "PAPER", "DEFAULT", "PRESETS", "PRESET_NAMES", "PRESET_FIELDS",
            "preset_named", "differences", "instance_defaults", "env_order", "env_alpha",
-           "env_option_alpha", "env_values"]
+           "env_option_alpha", "env_values", "TOP_LEARNER"]
+
+# The "mlp" top level's learner (agents/pieces.py), screened on Acrobot-v1 (seeds 0-9,
+# results/neural/README.md): a target copied every 250 updates propagates a return of gamma = 1
+# back one step per copy, about 25 copies in an agent's first 25,000 steps, and no neural agent
+# learned. Older runs' values are TrainConfig's LEGACY_FIELDS (lr 1e-3, 250, "sarsa"). Kept here,
+# with the other values a run starts from, so the command line reads it without the agents.
+TOP_LEARNER = {"lr": 1e-4, "target_update": 25, "bootstrap": "max"}
 
 
 def env_order(dim: int) -> int:

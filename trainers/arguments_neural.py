@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 
-from skillchain_torch.agents.pieces import TOP_LEARNER
+from skillchain_torch.presets import TOP_LEARNER
 
 __all__ = ["NEURAL_OPTIONS", "add_neural_arguments"]
 

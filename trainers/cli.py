@@ -157,9 +157,6 @@ def _config_from_args(parser, args) -> TrainConfig:
         parser.error(", ".join(map(_flag, learner)) + " set the learner of --top-head mlp, "
                      "and the top level here is fourier (closed-form Sarsa): add --top-head mlp "
                      "or leave them out")  # fmt: skip
-    if ("annealing_steps" in given) != ("epsilon_init" in given):
-        parser.error("--epsilon-init and --annealing-steps go together (the exploration's "
-                     "start and the agent steps to --epsilon)")  # fmt: skip
     if "env" in given and "map" in given:
         parser.error("--env and --map choose the environment twice: give one (--map is Pinball's)")
     if "obs_bounds" in given and "env" not in given:

@@ -31,10 +31,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from skillchain_torch.agents.pieces import TOP_LEARNER
 from skillchain_torch.discovery.readings import InitiationReading
 from skillchain_torch.presets import (
     PRESET_FIELDS,
+    TOP_LEARNER,
     env_values,
     instance_defaults,
     preset_named,
@@ -138,7 +138,7 @@ class TrainConfig:
             ``"logistic"``, or ``"mlp"`` for each (neural).
         top_lr, top_target_update, top_bootstrap: the ``"mlp"`` top level's learner: Adam's
             step size, optimizer steps between target copies, ``"max"`` (DQN's target) or
-            ``"sarsa"`` (:data:`~skillchain_torch.agents.pieces.TOP_LEARNER`).
+            ``"sarsa"`` (:data:`~skillchain_torch.presets.TOP_LEARNER`).
         epsilon_init, annealing_steps: skill chaining's top level explores at ``epsilon_init``
             at its first step, annealed linearly to ``epsilon`` over ``annealing_steps`` agent
             steps (:class:`~skillchain_torch.policies.LinearEpsilon`); ``None``: ``epsilon``

@@ -191,9 +191,9 @@ def check_values(config) -> None:
          "one of max, sarsa"),
         ("epsilon_init", config.epsilon_init, config.epsilon_init is None
          or 0.0 <= config.epsilon_init <= 1.0, "in [0, 1]"),
-        ("annealing_steps", config.annealing_steps, config.annealing_steps >= 0
-         and (config.annealing_steps >= 1 or config.epsilon_init is None),
-         ">= 1 with epsilon_init (>= 0 without)"),
+        ("annealing_steps", config.annealing_steps, config.annealing_steps >= 1
+         if config.epsilon_init is not None else config.annealing_steps == 0,
+         ">= 1 with epsilon_init and 0 without (epsilon_init and annealing_steps go together)"),
         *((name, repr(getattr(config, name)), getattr(config, name) in known,
            f"one of {', '.join(sorted(known))}") for name, known in (
             ("top_head", TOP_HEADS), ("option_head", OPTION_HEADS),

@@ -40,6 +40,7 @@ from torch import nn
 from skillchain_torch.modules import MLPQHead
 from skillchain_torch.objectives import OptionReplay, ReplayTD, SMDPSarsaLoss
 from skillchain_torch.options import MLPInitiationClassifier, MLPOptionQHead, OptionBank
+from skillchain_torch.presets import TOP_LEARNER
 
 __all__ = ["INITIATIONS", "OPTION_HEADS", "TOP_HEADS", "TOP_LEARNER", "assemble_bank",
            "register_piece", "top_level_arguments"]
@@ -51,13 +52,6 @@ VALUE_SCALE = 1000.0  # Q / 1000: outputs and TD errors of order 10 (Pinball's g
 def _first(seed) -> int:
     """Agent 0's seed (an int, or the first of per-agent seeds): seeds a learner's sampling."""
     return int(seed.reshape(-1)[0]) if isinstance(seed, torch.Tensor) else int(seed)
-
-
-# The MLP top level's learner, screened on Acrobot-v1 (seeds 0-9, results/neural/README.md): a
-# target copied every 250 updates propagates a return of gamma = 1 back one step per copy, about
-# 25 copies in an agent's first 25,000 steps, and no neural agent learned. Older runs' values are
-# TrainConfig's LEGACY_FIELDS (lr 1e-3, 250, "sarsa").
-TOP_LEARNER = {"lr": 1e-4, "target_update": 25, "bootstrap": "max"}
 
 
 def _mlp_top(population: int, obs_dim: int, num_decisions: int, gamma: float, seed: int,

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from skillchain_torch.agents.pieces import TOP_LEARNER, top_level_arguments
+from skillchain_torch.agents.pieces import top_level_arguments
 from skillchain_torch.policies import LinearEpsilon
 from skillchain_torch.policies import epsilon_schedule as schedule_module
+from skillchain_torch.presets import TOP_LEARNER
 from skillchain_torch.trainers import (
     PopulationTrainer,
     TrainConfig,
@@ -75,6 +76,12 @@ def test_an_annealed_run_resumes_bit_for_bit(tmp_path):
     resumed.train()
     assert np.array_equal(resumed.returns, reference.returns)
     assert np.array_equal(resumed.lengths, reference.lengths)
+
+
+@pytest.mark.parametrize("fields", [dict(annealing_steps=5), dict(epsilon_init=1.0)])
+def test_the_config_refuses_half_a_schedule(fields):
+    with pytest.raises(ValueError, match="go together"):
+        TrainConfig(agent="skill-chaining", **fields).validate()
 
 
 def test_a_saved_config_from_before_the_fields_keeps_the_old_learner():
