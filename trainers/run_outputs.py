@@ -75,9 +75,12 @@ def train_and_write(trainer, out: Path, quiet: bool) -> int:
         tb.close()
         print(_interrupted(out, trainer.config.checkpoint_every), file=sys.stderr)
         return 130
-    except FloatingPointError:  # a learner diverged: _run reports it
+    except Exception:  # a diverged learner, a full disk: _run reports it
         bar.close()
-        tb.close()
+        try:  # stop the event writer's thread before _run removes the files it writes to
+            tb.close()
+        except OSError:
+            pass  # the disk that failed the run may fail the last flush too: report the first
         raise
     tb.close()
     clock = time.perf_counter()

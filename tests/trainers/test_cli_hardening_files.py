@@ -9,6 +9,7 @@ This file: the files (the output directory, a full disk, a corrupt ``config.json
 
 import errno
 import json
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -76,11 +77,15 @@ def test_a_full_disk_at_the_first_checkpoint_fails_clearly_and_leaves_nothing(
         tmp_path, capsys, monkeypatch, failure):
     out = tmp_path / "run"
     argv = ["train", *TINY, "--out", str(out)]
+    before = set(threading.enumerate())
     line = _train_on_a_full_disk(monkeypatch, capsys, torch, "save", failure, argv)
     assert f"cannot write the run's outputs in {out}" in line
     assert "No space left on device" in line or "PytorchStreamWriter failed" in line
     assert "nothing to resume" in line
     assert not out.exists()  # the same command works once there is space
+    # the TensorBoard writer's thread, left running, could write into ``out`` as it is removed
+    assert not [t for t in set(threading.enumerate()) - before
+                if type(t).__name__ == "_AsyncWriterThread" and t.is_alive()]
     assert main(argv) == 0 and np.load(out / "returns.npy").shape == (1, 1)
 
 
