@@ -169,3 +169,20 @@ def test_cli_env_flags(tmp_path, capsys):
             main(["train", *argv, "--out", str(tmp_path / "bad")])
         assert exit_info.value.code == 2
         assert message in capsys.readouterr().err
+
+
+def test_a_run_with_replay_is_refused_by_verify_in_one_line(tmp_path, capsys):
+    """Replay buffers are shared by the population (results/neural/README.md): re-running one
+    agent alone cannot reproduce it, so verify says so instead of reporting a mismatch."""
+    cfg = TrainConfig(agent="skill-chaining", preset="paper", runs=2, episodes=1,
+                      max_episode_steps=10, top_head="mlp")  # fmt: skip
+    trainer = PopulationTrainer(cfg).train()
+    trainer.write_results(tmp_path)
+    trainer.config.save_json(tmp_path / "config.json")
+    with pytest.raises(ValueError, match="--top-head mlp cannot be re-run agent by agent"):
+        verify_run(tmp_path, [0])
+    with pytest.raises(SystemExit) as info:
+        main(["verify", str(tmp_path), "--agents", "0"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "re-run the whole command" in err[-1] and "Traceback" not in "\n".join(err)

@@ -4,6 +4,8 @@ By the seed contract agent ``p`` of a population started with seed ``S`` is the 
 with seed ``S + p``, whatever the other agents did. So any agent of a published run can be
 re-run on its own from the directory's ``config.json`` in a fraction of the run's time, and
 its returns and lengths must equal row ``p`` of ``returns.npy`` and ``lengths.npy`` exactly.
+Runs with an MLP top level or MLP option heads are refused: their replay buffers are shared by
+the population, so only the whole command reproduces them.
 
 A given-options run whose agents took saved agent ``p mod N``'s options (``--options-agent
 each``) re-runs agent ``p`` with saved agent ``p mod N``'s, from its options file
@@ -84,6 +86,13 @@ def verify_run(run_dir: str | Path, agents, native: bool | None = None,
         if not (run_dir / name).is_file():
             raise ValueError(f"{run_dir}: no {name} (not a finished run directory)")
     config = TrainConfig.load_json(run_dir / "config.json").resolved()
+    replayed = [f"--{f.replace('_', '-')} mlp" for f in ("top_head", "option_head")
+                if getattr(config, f) == "mlp"]  # fmt: skip
+    if replayed:  # a replay buffer shared by the population: no agent can be re-run alone
+        raise ValueError(f"{run_dir}: a run with {' and '.join(replayed)} cannot be re-run agent "
+                         f"by agent (its replay buffers are shared by the population and sampled "
+                         f"from the run's seed; results/neural/README.md); re-run the whole "
+                         f"command to reproduce it")  # fmt: skip
     returns, lengths = np.load(run_dir / "returns.npy"), np.load(run_dir / "lengths.npy")
     if returns.shape != (config.runs, config.episodes) or lengths.shape != returns.shape:
         raise ValueError(f"{run_dir}: returns.npy {returns.shape} / lengths.npy {lengths.shape} "
