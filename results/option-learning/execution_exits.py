@@ -22,41 +22,37 @@ from pathlib import Path
 
 import numpy as np
 
-from skillchain_torch.discovery.step_rules import StepRules
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from timeout_starts import on_execution_end  # noqa: E402  (the same hook, one place)
 
 HERE = Path(__file__).resolve().parent
 STAYS = (3, 5, 10, 20)
 
 
 def record(records: list, first_episode: int) -> None:
-    finish = StepRules._finish_executions
+    """Append a row per execution ending from ``first_episode`` on (the columns above)."""
 
-    def recorded(self, option, reached, duration, ended, terminated):
-        rows = (ended & (option >= 0)).nonzero()[:, 0]
-        slot = option.clamp(min=0)
-        hit = reached.gather(1, slot[:, None])[:, 0]
-        for p in rows.tolist():
-            if int(self.episode[p]) < first_episode:
-                continue
-            k, n = int(slot[p]), int(duration[p])
-            inside = self.bank.classifier.contains_points(
-                p, k, self.trace.states[p, :min(n, self.trace.max_steps)])
-            outside = (~inside).tolist()
-            first_out = outside.index(True) if True in outside else -1
-            run = longest = 0
-            stay = dict.fromkeys(STAYS, -1)
-            for i, out in enumerate(outside):
-                run = run + 1 if out else 0
-                longest = max(longest, run)
-                for m in STAYS:
-                    if run >= m and stay[m] < 0:
-                        stay[m] = i
-            records.append((p, int(self.episode[p]), k, int(hit[p]), n, int(terminated[p]),
-                            first_out, float(inside.double().mean()), longest, *stay.values()))
-        return finish(self, option, reached, duration, ended, terminated)
+    def row(rules, p, k, success, duration, terminated):
+        if int(rules.episode[p]) < first_episode:
+            return
+        inside = rules.bank.classifier.contains_points(
+            p, k, rules.trace.states[p, :min(duration, rules.trace.max_steps)])
+        outside = (~inside).tolist()
+        first_out = outside.index(True) if True in outside else -1
+        run = longest = 0
+        stay = dict.fromkeys(STAYS, -1)
+        for i, out in enumerate(outside):
+            run = run + 1 if out else 0
+            longest = max(longest, run)
+            for m in STAYS:
+                if run >= m and stay[m] < 0:
+                    stay[m] = i
+        records.append((p, int(rules.episode[p]), k, success, duration, terminated, first_out,
+                        float(inside.double().mean()), longest, *stay.values()))
 
-    StepRules._finish_executions = recorded
+    on_execution_end(row)
 
 
 def main(runs: int, seed: int, first_episode: int) -> None:

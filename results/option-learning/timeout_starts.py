@@ -28,27 +28,37 @@ COLUMNS = ("agent", "episode", "slot", "success", "duration", "terminated", "nea
            "nearest_positive", "x", "y", "xdot", "ydot")  # fmt: skip
 
 
-def record_executions(records: list) -> None:
-    """Wrap discovery's end-of-execution rule to append a row per ended execution."""
+def on_execution_end(row) -> None:
+    """Wrap discovery's end-of-execution rule: ``row(rules, p, k, success, duration,
+    terminated)`` for each agent ``p`` whose execution of slot ``k`` ends, before the rule runs
+    (the slot's stored examples and ``rules.trace`` still as the execution left them)."""
     finish = StepRules._finish_executions
 
     def recorded(self, option, reached, duration, ended, terminated):
         rows = (ended & (option >= 0)).nonzero()[:, 0]
         slot = option.clamp(min=0)
         hit = reached.gather(1, slot[:, None])[:, 0]
-        clf = self.bank.classifier
         for p in rows.tolist():
-            k, start = int(slot[p]), self.trace.states[p, 0]
-            n = int(clf.count[p, k])
-            labels, examples = clf.labels[p, k, :n], clf.examples[p, k, :n]
-            distance = torch.cdist(start[None], examples)[0]
-            nearest = [float(distance[m].min()) if bool(m.any()) else np.inf
-                       for m in (~labels, labels)]  # fmt: skip
-            records.append((p, int(self.episode[p]), k, int(hit[p]), int(duration[p]),
-                            int(terminated[p]), *nearest, *start.tolist()))  # fmt: skip
+            row(self, p, int(slot[p]), int(hit[p]), int(duration[p]), int(terminated[p]))
         return finish(self, option, reached, duration, ended, terminated)
 
     StepRules._finish_executions = recorded
+
+
+def record_executions(records: list) -> None:
+    """Append a row per ended execution (the columns ``COLUMNS``) to ``records``."""
+
+    def row(rules, p, k, success, duration, terminated):
+        clf = rules.bank.classifier
+        start, n = rules.trace.states[p, 0], int(clf.count[p, k])
+        labels, examples = clf.labels[p, k, :n], clf.examples[p, k, :n]
+        distance = torch.cdist(start[None], examples)[0]
+        nearest = [float(distance[m].min()) if bool(m.any()) else np.inf
+                   for m in (~labels, labels)]  # fmt: skip
+        records.append((p, int(rules.episode[p]), k, success, duration, terminated, *nearest,
+                        *start.tolist()))  # fmt: skip
+
+    on_execution_end(row)
 
 
 def main(name: str, flags: list[str]) -> None:

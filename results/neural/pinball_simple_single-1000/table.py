@@ -46,8 +46,8 @@ def main() -> None:
     print("|---|" + "---|" * (len(WINDOWS) + 2))
     for name, r in data.items():
         ret = r["returns"]
-        cells = [f"{m:,.0f} ± {h:,.0f}" if b <= ret.shape[1] else "" for (a, b) in WINDOWS
-                 for m, h in [mean_ci(ret[:, a - 1:b].mean(1)) if b <= ret.shape[1] else (0, 0)]]
+        cells = ["{:,.0f} ± {:,.0f}".format(*mean_ci(ret[:, a - 1:b].mean(1)))
+                 if b <= ret.shape[1] else "" for a, b in WINDOWS]
         opts = execs = ""
         if "n_options" in r and r["n_options"][:, -1].max() > 0:
             opts = f"{r['n_options'][:, -1].mean():.1f} (max {r['n_options'][:, -1].max()})"
@@ -69,6 +69,7 @@ def main() -> None:
 def fmt_diff(a: np.ndarray, b: np.ndarray) -> str:
     m, h = diff_ci(a, b)
     return f"{m:+,.0f} ± {h:,.0f}"
+
 
 if __name__ == "__main__":
     main()

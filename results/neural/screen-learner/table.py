@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skillchain_torch.trainers.study.intervals import t_quantile
+from skillchain_torch.trainers.study.intervals import mean_ci
 
 HERE = Path(__file__).resolve().parent
 RUNS = [  # name, target copy every (updates), Adam lr, update every (steps), bootstrap, gamma
@@ -23,9 +23,8 @@ WINDOWS = [(0, 10), (10, 25), (25, 50), (50, 60)]
 
 
 def cell(r: np.ndarray, a: int, b: int) -> str:
-    m = r[:, a:b].mean(1)
-    half = t_quantile(0.975, len(m) - 1) * m.std(ddof=1) / np.sqrt(len(m))
-    return f"{m.mean():,.0f} ± {half:,.0f}"
+    mean, half = mean_ci(r[:, a:b].mean(1))
+    return f"{mean:,.0f} ± {half:,.0f}"
 
 
 def main() -> None:
