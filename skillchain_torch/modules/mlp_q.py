@@ -77,8 +77,10 @@ class MLPQHead(nn.Module):
             raise ValueError(f"seed must be an int or [P={population}] seeds, got {len(seeds)}")
         self.config = dict(hidden=int(hidden), layers=int(layers), value_scale=self.value_scale)
         sizes = [self.num_features] + [int(hidden)] * int(layers) + [self.num_decisions]
-        # set_values calls so far (saved: a resumed learner compares its count with it)
-        self.register_buffer("writes", torch.zeros((), dtype=torch.int64))
+        # set_values writes so far, per agent (saved: a resumed learner compares with it, and
+        # copies the target of the agents written, of no other)
+        self.register_buffer("writes", torch.zeros(population, dtype=torch.int64,
+                                                   device=device))  # fmt: skip
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
         for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
@@ -96,6 +98,12 @@ class MLPQHead(nn.Module):
                     n = weight.shape[1] * weight.shape[2]
                     weight[p] = (bound * draws[:n]).reshape(weight.shape[1:]).to(weight)
                     bias[p] = (bound * draws[n:]).to(bias)
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        key = prefix + "writes"  # saved before writes were counted per agent: one total
+        if key in state_dict and state_dict[key].ndim == 0:
+            state_dict[key] = state_dict[key].expand(self.population).clone()
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def forward(self, phi: Tensor) -> Tensor:
         """``phi [*B, P, F] -> Q [*B, P, D]`` (in ``phi``'s dtype)."""
@@ -129,7 +137,7 @@ class MLPQHead(nn.Module):
         output weights go to 0 and its bias to ``value / value_scale``."""
         weight, bias = self.weights[-1], self.biases[-1]
         m = mask.to(device=weight.device, dtype=torch.bool)
-        self.writes += 1  # (a learner's target copy refreshes when it sees a write)
+        self.writes += m.any(-1).to(self.writes)  # (a learner copies these agents' targets)
         weight.copy_(torch.where(m[:, None, :], torch.zeros_like(weight), weight))
         target = (value.to(bias) / self.value_scale)
         bias.copy_(torch.where(m, target, bias))

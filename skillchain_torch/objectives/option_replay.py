@@ -36,34 +36,53 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
-from skillchain_torch.objectives.replay import seeded_buffer, store
+from skillchain_torch.objectives.agent_storage import AgentReplayStorage
 
 __all__ = ["OptionReplay"]
+
+STREAM = 0x0B8  # the option heads' replay draws (a CounterRNG stream of its own)
 
 
 class OptionReplay:
     """Store each transition with its update mask; step the head on sampled minibatches.
 
     Args:
-        capacity: population steps kept; batch_size: B population steps per minibatch.
-        train_every: one minibatch step per this many stored steps.
-        warmup: steps stored before the first (default ``batch_size``).
-        target_update: minibatch steps between copies of the target parameters that value
-            ``max_a Q(s', a)``.
-        seed: of the sampling generator (the global RNG is never touched).
+        capacity: transitions kept per agent; batch_size: B transitions per agent per
+            minibatch.
+        train_every: one minibatch step per this many calls (population steps, which are the
+            agent's own steps).
+        warmup: an agent's transitions stored before it learns (default ``batch_size``).
+        target_update: an agent's minibatch steps between copies of its target parameters
+            (which value ``max_a Q(s', a)``).
+        seed: int (agent p samples with ``seed + p``) or ``LongTensor [P]``.
+
+    **Per agent.** Agent p stores the transitions in which some option of its own learns (its
+    mask row is not all False), in a ring of its own, sampled by a stream of its own
+    (:class:`~skillchain_torch.objectives.agent_storage.AgentReplayStorage`); it learns at every
+    ``train_every``-th call once it holds ``warmup`` transitions, and its target is copied on
+    its own update count and whenever one of its slots is reset. The head steps by plain SGD
+    (no optimizer state), so an agent masked out of a step does not move: its run depends on
+    its seed alone, whatever the rest of the population does.
     """
 
     def __init__(self, capacity: int = 50_000, batch_size: int = 32, train_every: int = 4,
-                 warmup: int | None = None, target_update: int = 250, seed: int = 0):  # fmt: skip
+                 warmup: int | None = None, target_update: int = 250,
+                 seed: int | Tensor = 0):  # fmt: skip
         if min(capacity, batch_size, train_every, target_update) < 1:
             raise ValueError("capacity, batch_size, train_every and target_update must be >= 1")
         self.batch_size, self.train_every = int(batch_size), int(train_every)
         self.warmup = self.batch_size if warmup is None else int(warmup)
         self.target_update = int(target_update)
-        self.buffer, self.generator = seeded_buffer(capacity, self.batch_size, seed)
-        self.stored = self.updates = 0
+        self.memory = AgentReplayStorage(capacity, self.batch_size, seed, stream=STREAM)
+        self.calls = 0
+        self.updates: Tensor | None = None  # [P] minibatch steps each agent has taken
         self.target: list[tuple[Tensor, Tensor]] | None = None
-        self._epochs = -1  # the heads' reset count at the last target copy
+        self._epochs: Tensor | None = None  # [P] each agent's slot resets at its last copy
+
+    @property
+    def stored(self) -> int:
+        """Transitions stored so far, all agents together."""
+        return 0 if self.memory.count is None else int(self.memory.count.sum())
 
     def __call__(self, head, obs: Tensor, action: Tensor, reward: Tensor, next_obs: Tensor,
                  terminated: Tensor, reached: Tensor, mask: Tensor, gamma: float,
@@ -78,31 +97,50 @@ class OptionReplay:
             q_sa = head(obs).gather(2, action.to(torch.int64)[:, None, None].expand(
                 -1, head.slots, 1))[..., 0]  # fmt: skip
             delta = torch.where(mask, target - q_sa, torch.zeros_like(q_sa))
-        if not bool(mask.any()):
-            return delta
-        P = head.population
-        item = TensorDict(obs=obs, action=action.to(torch.int64), reward=reward.reshape(P),
-                          next_obs=next_obs, terminated=terminated.reshape(P).to(torch.bool),
-                          reached=reached, mask=mask, epoch=head.slot_epoch.clone(),
-                          batch_size=[P])  # fmt: skip
-        store(self.buffer, item)
-        self.stored += 1
-        if len(self.buffer) >= self.warmup and self.stored % self.train_every == 0:
-            self._learn(head, gamma, completion_reward)
+        rows = mask.any(-1)
+        if bool(rows.any()):
+            P = head.population
+            item = TensorDict(obs=obs, action=action.to(torch.int64), reward=reward.reshape(P),
+                              next_obs=next_obs, terminated=terminated.reshape(P).to(torch.bool),
+                              reached=reached, mask=mask, epoch=head.slot_epoch.clone(),
+                              batch_size=[P])  # fmt: skip
+            self.memory.add(item, rows)
+        self.calls += 1
+        if self.calls % self.train_every == 0 and self.memory.started:
+            ready = self.memory.count >= self.warmup
+            if bool(ready.any()):
+                self._learn(head, gamma, completion_reward, ready)
         return delta
 
-    def _learn(self, head, gamma: float, completion_reward) -> None:
+    def _copy_targets(self, head, ready: Tensor) -> None:
+        """Agent p's target takes its online weights every ``target_update`` of its own steps,
+        and whenever one of its slots was reset (a new option took it: copy the fresh net)."""
+        epochs = head.slot_epoch.sum(-1)
+        if self.target is None:
+            self.target = [(w.detach().clone(), b.detach().clone()) for w, b in head._layers()]
+            self.updates = torch.zeros_like(epochs)
+            self._epochs = epochs.clone()
+            return
+        copy = (ready & (self.updates % self.target_update == 0)) | (epochs != self._epochs)
+        if not bool(copy.any()):
+            return
+        self._epochs = torch.where(copy, epochs, self._epochs)
+        for (tw, tb), (w, b) in zip(self.target, head._layers()):
+            tw.copy_(torch.where(copy.reshape(-1, *[1] * (w.ndim - 1)), w.detach(), tw))
+            tb.copy_(torch.where(copy.reshape(-1, *[1] * (b.ndim - 1)), b.detach(), tb))
+
+    def _learn(self, head, gamma: float, completion_reward, ready: Tensor | None = None) -> None:
         from skillchain_torch.objectives.q_learning import option_td_target
 
-        epochs = int(head.slot_epoch.sum())  # a new option took a slot: copy its fresh net
-        if (self.target is None or self.updates % self.target_update == 0
-                or epochs != self._epochs):  # fmt: skip
-            self._epochs = epochs
-            self.target = [(w.detach().clone(), b.detach().clone()) for w, b in head._layers()]
-        batch = self.buffer.sample()  # [B, P]
-        B, P, K = batch.shape[0], head.population, head.slots
-        # A slot a new option took since the transition was stored learns nothing from it.
-        mask = batch["mask"] & (batch["epoch"] == head.slot_epoch)
+        P, K = head.population, head.slots
+        if ready is None:
+            ready = self.memory.count >= 1
+        self._copy_targets(head, ready)
+        batch = self.memory.sample(ready)  # [B, P]
+        B = batch.shape[0]
+        # A slot a new option took since the transition was stored learns nothing from it, and
+        # an agent not yet warm learns nothing at all.
+        mask = batch["mask"] & (batch["epoch"] == head.slot_epoch) & ready[:, None]
         with torch.no_grad():
             next_max = head._values(batch["next_obs"], self.target).amax(-1)  # [B, P, K]
             c = torch.as_tensor(completion_reward, dtype=next_max.dtype, device=next_max.device)
@@ -113,15 +151,15 @@ class OptionReplay:
                                       batch["terminated"].reshape(B * P), gamma,
                                       c).reshape(B, P, K)  # fmt: skip
         head.step(batch["obs"], batch["action"], target, mask)
-        self.updates += 1
+        self.updates = self.updates + ready.to(self.updates)
 
     def state_dict(self) -> dict:
-        return {"buffer": self.buffer.state_dict(), "generator": self.generator.get_state(),
-                "stored": self.stored, "updates": self.updates, "target": self.target,
-                "epochs": self._epochs}
+        return {"memory": self.memory.state_dict(), "calls": self.calls,
+                "updates": self.updates, "target": self.target, "epochs": self._epochs}
 
     def load_state_dict(self, state: dict) -> None:
-        self.buffer.load_state_dict(state["buffer"])
-        self.generator.set_state(state["generator"])
-        self.stored, self.updates = int(state["stored"]), int(state["updates"])
-        self.target, self._epochs = state["target"], int(state["epochs"])
+        if "memory" not in state:
+            AgentReplayStorage(1, 1).load_state_dict(state)  # (raises: the shared format)
+        self.memory.load_state_dict(state["memory"])
+        self.calls, self.updates = int(state["calls"]), state["updates"]
+        self.target, self._epochs = state["target"], state["epochs"]

@@ -3,14 +3,18 @@
 The paper's linear learners update once per transition. A neural head trained that way forgets
 and chases its own tail; DQN's remedy is a replay buffer and a target network. :class:`ReplayTD`
 is that remedy for any loss module of this package, built from TorchRL's pieces: a
-``ReplayBuffer`` over a ``LazyTensorStorage``, sampled by its own ``torch.Generator`` (so the
-global RNG is never touched and a seed gives the same run), and ``HardUpdate`` for the target
-parameters of a loss made with ``delay_value=True``.
+``LazyTensorStorage`` (one ring per agent, sampled by counter-based streams: the global RNG is
+never touched and a seed gives the same run), and ``HardUpdate`` for the target parameters of
+a loss made with ``delay_value=True``.
 
-**Per agent of the population.** Each stored item is one population step, a TensorDict of
-batch ``[P]`` with an ``active`` mask (the agents whose decision ended there). A minibatch is
-``[B, P]``: ``B`` stored steps, each agent's rows its own transitions, inactive rows masked out
-of the loss, which sums over agents; so agent p's network learns only from agent p's past.
+**Per agent of the population.** Each agent stores its own transitions (the rows whose
+``active`` flag is set: its decision ended there) in a memory of its own and samples them by a
+random stream of its own (:class:`~skillchain_torch.objectives.agent_storage.
+AgentReplayStorage`). A minibatch is ``[B, P]``: column p is B of agent p's transitions,
+masked out of the loss until agent p holds ``warmup`` of them; the loss sums over agents. The
+schedule reads the population step, which is every agent's own step count (every active agent
+steps once per population step), so an agent's updates, target copies and optimizer step
+count are the same in any population: its run depends on its seed alone.
 
 Example:
     >>> import torch
@@ -35,37 +39,16 @@ Example:
 
 from __future__ import annotations
 
-import logging
-
 import torch
 from tensordict import TensorDictBase
 from torch import Tensor
-from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.objectives import HardUpdate, LossModule
 
-__all__ = ["ReplayTD", "seeded_buffer", "store"]
+from skillchain_torch.objectives.agent_storage import AgentReplayStorage
 
+__all__ = ["ReplayTD"]
 
-def seeded_buffer(capacity: int, batch_size: int,
-                  seed: int) -> tuple[ReplayBuffer, torch.Generator]:  # fmt: skip
-    """A TorchRL replay buffer over a ``LazyTensorStorage`` sampled by a generator of its own
-    (seeded ``seed``), so the global RNG is never touched; ``(buffer, generator)``."""
-    generator = torch.Generator().manual_seed(int(seed))
-    buffer = ReplayBuffer(storage=LazyTensorStorage(int(capacity)), batch_size=int(batch_size),
-                          generator=generator)  # fmt: skip
-    return buffer, generator
-
-
-def store(buffer: ReplayBuffer, item: TensorDictBase) -> None:
-    """Add one population step ``item [P]`` to ``buffer`` as one element, without TorchRL's
-    INFO line when the first one allocates the storage (it would break a run's quiet output)."""
-    logger = logging.getLogger("torchrl")
-    level = logger.level
-    logger.setLevel(max(level, logging.WARNING))
-    try:
-        buffer.extend(item.unsqueeze(0))
-    finally:
-        logger.setLevel(level)
+STREAM = 0x5EB  # the top level's replay draws (a CounterRNG stream of its own)
 
 
 class ReplayTD:
@@ -76,33 +59,44 @@ class ReplayTD:
             target parameters (``delay_value=True``) they are copied every ``target_update``
             optimizer steps (TorchRL's ``HardUpdate``).
         optimizer: over the head's parameters.
-        capacity: population steps kept (the oldest go first).
-        batch_size: B, population steps per minibatch.
-        warmup: steps stored before the first update (default ``batch_size``).
+        capacity: transitions kept per agent (its oldest go first).
+        batch_size: B, transitions per agent per minibatch.
+        warmup: an agent's transitions stored before it learns (default ``batch_size``).
         target_update: optimizer steps between target copies.
-        train_every: one optimizer step per this many stored steps (DQN's train frequency).
-        seed: of the sampling generator.
+        train_every: one optimizer step per this many calls (population steps: DQN's train
+            frequency, counted in the agent's own steps).
+        seed: int (agent p samples with ``seed + p``) or ``LongTensor [P]`` of agent seeds.
 
-    ``learner(td [P])`` stores ``td`` if any agent is active, takes an optimizer step on a
-    minibatch every ``train_every`` stored steps once ``warmup`` are stored, and returns
-    ``td``'s TD errors ``[P]`` toward its ``next_value`` (the loss's :meth:`td_error` when it
-    has one: the online parameters before the step; 0 for inactive agents).
+    ``learner(td [P])`` stores the active agents' rows, takes an optimizer step every
+    ``train_every`` calls on each agent's own minibatch, and returns ``td``'s TD errors ``[P]``
+    toward its ``next_value`` (the loss's :meth:`td_error` when it has one: the online
+    parameters before the step; 0 for inactive agents).
+
+    The optimizer steps at every ``train_every``-th call even while no agent has learned yet
+    (zero gradients), so its step count, which Adam's bias correction reads, is a function of
+    the call count alone. An agent that is not yet warm gets exactly zero gradient; Adam's
+    moments for its weights stay 0 and its weights do not move.
     """
 
     def __init__(self, loss: LossModule, optimizer: torch.optim.Optimizer, capacity: int = 50_000,
                  batch_size: int = 32, warmup: int | None = None, target_update: int = 500,
-                 train_every: int = 1, seed: int = 0):  # fmt: skip
+                 train_every: int = 1, seed: int | Tensor = 0):  # fmt: skip
         if min(capacity, batch_size, target_update, train_every) < 1:
             raise ValueError("capacity, batch_size, target_update and train_every must be >= 1")
         self.loss, self.optimizer = loss, optimizer
         self.batch_size = int(batch_size)
         self.warmup = self.batch_size if warmup is None else int(warmup)
-        self.buffer, self.generator = seeded_buffer(capacity, self.batch_size, seed)
+        self.memory = AgentReplayStorage(capacity, self.batch_size, seed, stream=STREAM)
         targets = any(name.startswith("target_") for name, _ in loss.named_children())
         self.updater = (HardUpdate(loss, value_network_update_interval=int(target_update))
                         if targets else None)  # fmt: skip
-        self.train_every, self.stored, self.updates = int(train_every), 0, 0
-        self._writes = 0  # the head's set_values count when the target was last copied
+        self.train_every, self.calls, self.updates = int(train_every), 0, 0
+        self._writes: Tensor | None = None  # the head's set_values counts at the last copy
+
+    @property
+    def stored(self) -> int:
+        """Transitions stored so far, all agents together."""
+        return 0 if self.memory.count is None else int(self.memory.count.sum())
 
     def __call__(self, td: TensorDictBase) -> Tensor:
         if hasattr(self.loss, "td_error"):
@@ -110,42 +104,72 @@ class ReplayTD:
         else:
             with torch.no_grad():
                 delta = self.loss(td)["td_error"]
-        if not bool(td.get("active").any()):
-            return delta
-        store(self.buffer, td.detach().clone())
-        self.stored += 1
-        if len(self.buffer) >= self.warmup and self.stored % self.train_every == 0:
-            batch = self.buffer.sample()
-            self.optimizer.zero_grad()
-            self.loss(batch)["loss"].backward()
-            self.optimizer.step()
-            self.updates += 1
-            if self.updater is not None:
-                self.updater.step()
-        writes = int(getattr(getattr(self.loss, "value_head", None), "writes", 0))
-        if writes != self._writes and self.updater is not None:
-            # Discovery set a joining option's value: the target copy takes it now, or targets
-            # would bootstrap from the slot's stale value until the next scheduled copy.
-            for name, target in self.loss.named_children():
-                if name.startswith("target_"):
-                    target.data.copy_(getattr(self.loss, name[len("target_"):]).data)
-            self._writes = writes
+        active = td.get("active").to(torch.bool)
+        if bool(active.any()):
+            self.memory.add(td.detach(), active)
+        self.calls += 1
+        if self.calls % self.train_every == 0:
+            self._step()
+        self._copy_written()
         return delta
 
+    def _step(self) -> None:
+        self.optimizer.zero_grad()
+        if self.memory.started:
+            ready = self.memory.count >= self.warmup
+            batch = self.memory.sample(ready)  # [B, P]
+            batch.set("active", batch.get("active").to(torch.bool) & ready)
+            self.loss(batch)["loss"].backward()
+        for group in self.optimizer.param_groups:  # no agent warm yet: a step of zeros
+            for param in group["params"]:
+                if param.grad is None:
+                    param.grad = torch.zeros_like(param)
+        self.optimizer.step()
+        self.updates += 1
+        if self.updater is not None:
+            self.updater.step()
+
+    def _copy_written(self) -> None:
+        """Discovery set a joining option's value: the target copy takes it now, or targets
+        would bootstrap from the slot's stale value until the next scheduled copy. Only the
+        agents whose head was written (a head counting writes per agent, ``writes [P]``, as
+        :class:`~skillchain_torch.modules.MLPQHead`, with parameters stacked ``[P, ...]``);
+        a head counting one total has all its targets copied."""
+        head = getattr(self.loss, "value_head", None)
+        writes = getattr(head, "writes", None)
+        if writes is None or self.updater is None:
+            return
+        if self._writes is None:
+            self._writes = writes.clone()
+            return
+        changed = writes != self._writes
+        if not bool(changed.any()):
+            return
+        for name, target in self.loss.named_children():
+            if name.startswith("target_"):
+                source = getattr(self.loss, name[len("target_"):]).data
+                if changed.ndim == 0:
+                    target.data.copy_(source)
+                else:
+                    target.data.update_(source.apply(
+                        lambda new, old: torch.where(
+                            changed.to(new.device).reshape(-1, *[1] * (new.ndim - 1)), new, old),
+                        target.data))  # fmt: skip
+        self._writes = writes.clone()
+
     def state_dict(self) -> dict:
-        return {"buffer": self.buffer.state_dict(), "optimizer": self.optimizer.state_dict(),
-                "generator": self.generator.get_state(), "updates": self.updates,
-                "stored": self.stored, "writes": self._writes,
+        return {"memory": self.memory.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "updates": self.updates, "calls": self.calls, "writes": self._writes,
                 "targets": self.loss.state_dict(),
                 "counter": getattr(self.updater, "counter", 0)}  # fmt: skip
 
     def load_state_dict(self, state: dict) -> None:
-        self.buffer.load_state_dict(state["buffer"])
+        if "memory" not in state:
+            AgentReplayStorage(1, 1).load_state_dict(state)  # (raises: the shared format)
+        self.memory.load_state_dict(state["memory"])
         self.optimizer.load_state_dict(state["optimizer"])
-        self.generator.set_state(state["generator"])
-        self.updates, self.stored = int(state["updates"]), int(state["stored"])
-        self._writes = int(state.get("writes", 0))
+        self.updates, self.calls = int(state["updates"]), int(state["calls"])
+        self._writes = state["writes"]
         self.loss.load_state_dict(state["targets"])
         if self.updater is not None:
             self.updater.counter = int(state["counter"])
-

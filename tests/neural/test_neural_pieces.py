@@ -130,7 +130,7 @@ def test_option_replay_approaches_the_chains_return_and_forgets_a_slots_predeces
     q = torch.stack([head(chain_obs(torch.full((P,), k)))[:, :, 0] for k in range(N - 1)])
     assert (q[..., 0] - TRUE[:, None]).abs().max() < 0.05 * GOAL
     assert float(q[..., 1].abs().max()) == 0.0  # untouched: masked out of every sample
-    assert head.replay.updates > 1000
+    assert int(head.replay.updates.min()) > 1000  # every agent learned, each on its own count
     # A new option takes slot 0: the stored transitions are its predecessor's, so a replayed
     # step leaves the fresh slot where it starts (Q = 0).
     head.reset_slots(torch.tensor([[True, False]] * P))

@@ -172,8 +172,9 @@ def test_cli_env_flags(tmp_path, capsys):
 
 
 def test_a_run_with_replay_is_refused_by_verify_in_one_line(tmp_path, capsys):
-    """Replay buffers are shared by the population (results/neural/README.md): re-running one
-    agent alone cannot reproduce it, so verify says so instead of reporting a mismatch."""
+    """A network's batched matmuls may round differently for a population of one
+    (results/neural/README.md): re-running one agent alone need not reproduce it bit for bit,
+    so verify says so instead of reporting a mismatch."""
     cfg = TrainConfig(agent="skill-chaining", preset="paper", runs=2, episodes=1,
                       max_episode_steps=10, top_head="mlp")  # fmt: skip
     trainer = PopulationTrainer(cfg).train()
