@@ -344,7 +344,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         learn = option_update_mask(self.own_contains, self.option, bank.live() & stepped[:, None])
         option_delta = self.option_update(
             bank.q_head, self.obs, self.action, reward, next_obs, terminated, learn, reached,
-            code=self.option_code, next_code=next_code,
+            code=self.option_code, next_code=next_code, stepped=stepped,
         )
         # The decision in force accumulates the (discounted) reward.
         if self.gamma == 1.0:  # gamma^k = 1 exactly: skip the power
@@ -374,8 +374,8 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
             self._learn_inside(reward, terminated, inside, stepped, phi_next)
         smdp_delta = self.learn(self.decision_phi, self.decision, self.decision_return,
                                 self.duration.clamp(min=1), q_next, terminated, decision_ended,
-                                next_phi=phi_next, next_decision=d_next,
-                                next_available=self.last_available)  # (for a top_learner)
+                                next_phi=phi_next, next_decision=d_next,  # (a top_learner's)
+                                next_available=self.last_available, stepped=stepped)
         # The state tensors are replaced, never written in place, so no copies are needed.
         info = {"decision_ended": decision_ended, "duration": self.duration,
                 "decision_return": self.decision_return, "option_delta": option_delta,

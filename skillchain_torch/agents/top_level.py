@@ -114,7 +114,7 @@ class TopLevel:
         for the ``active`` agents; their TD errors ``[P]``. The built-in linear head steps in
         closed form (:class:`SarsaUpdate`); any other by its loss and optimizer, or by the
         agent's ``top_learner`` (which also reads ``next_state``: ``next_phi``,
-        ``next_decision``, ``next_available``)."""
+        ``next_decision``, ``next_available``, and ``stepped``: the agents still running)."""
         if self.closed_form:
             return self.update(self.q_head, phi, decision, ret, duration, phi, decision,
                                terminated, active=active, next_value=next_value)

@@ -27,6 +27,8 @@ import math
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.modules.stacked import stacked_affine
+
 __all__ = ["MLPQHead"]
 
 
@@ -50,13 +52,14 @@ class MLPQHead(nn.Module):
             float64 and its tanh costs several times more there). The values come back in the
             input's dtype, so the agent's arithmetic stays in float64.
 
-    Why stacked weights and ``baddbmm`` rather than ``torch.func.vmap`` over P copies of one
+    Why stacked weights and batched matmuls rather than ``torch.func.vmap`` over P copies of one
     module: the input may carry leading batch dims (``[B, P, F]``, a replay minibatch), and a
     batched matmul is one kernel per layer for all P agents. The output layer starts at
     zero, so every decision starts at ``Q = 0`` as in the linear head; :meth:`set_values` writes
     a constant value for a decision (the way discovery starts a joining option) by zeroing that
-    decision's output weights and setting its bias. Not bit-identical across population sizes
-    (a batched matmul may block differently for different P).
+    decision's output weights and setting its bias. Each agent's arithmetic is the same in any
+    population (:func:`~skillchain_torch.modules.stacked.stacked_affine`), so an agent re-run
+    alone computes the same bits.
     """
 
     def __init__(self, num_features: int, num_decisions: int, population: int,
@@ -112,7 +115,7 @@ class MLPQHead(nn.Module):
         x = x.reshape(-1, self.population, self.num_features).transpose(0, 1)  # [P, N, F]
         last = len(self.weights) - 1
         for i, (weight, bias) in enumerate(zip(self.weights, self.biases)):
-            x = torch.baddbmm(bias[:, None, :], x, weight)  # each agent's layer on its rows
+            x = stacked_affine(x, weight, bias)  # each agent's layer on its rows
             if i < last:
                 x = torch.tanh(x)
         q = (x * self.value_scale).transpose(0, 1).reshape(*lead, self.population, -1)

@@ -86,9 +86,10 @@ class OptionReplay:
 
     def __call__(self, head, obs: Tensor, action: Tensor, reward: Tensor, next_obs: Tensor,
                  terminated: Tensor, reached: Tensor, mask: Tensor, gamma: float,
-                 completion_reward) -> Tensor:  # fmt: skip
-        """Store the transition (``[P]`` rows, ``mask [P, K]``); maybe step; ``delta [P, K]``
-        of this transition under the current parameters (0 off ``mask``)."""
+                 completion_reward, alive: Tensor | None = None) -> Tensor:  # fmt: skip
+        """Store the transition (``[P]`` rows, ``mask [P, K]``); maybe step the agents in
+        ``alive [P]`` (default all: an agent that finished its episodes stops learning);
+        ``delta [P, K]`` of this transition under the current parameters (0 off ``mask``)."""
         from skillchain_torch.objectives.q_learning import option_td_target
 
         with torch.no_grad():
@@ -108,6 +109,8 @@ class OptionReplay:
         self.calls += 1
         if self.calls % self.train_every == 0 and self.memory.started:
             ready = self.memory.count >= self.warmup
+            if alive is not None:
+                ready = ready & alive.to(device=ready.device, dtype=torch.bool)
             if bool(ready.any()):
                 self._learn(head, gamma, completion_reward, ready)
         return delta

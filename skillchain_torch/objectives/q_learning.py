@@ -137,6 +137,7 @@ class IntraOptionQLearning(nn.Module):
         code: Tensor | None = None,
         next_code: Tensor | None = None,
         executing: Tensor | None = None,
+        stepped: Tensor | None = None,
     ) -> Tensor:
         """Update the ``(p, k)`` of :func:`option_update_mask`; return ``delta [P, K]``.
 
@@ -156,6 +157,9 @@ class IntraOptionQLearning(nn.Module):
                 ``next_obs`` are not read.
             executing: ``LongTensor [P]``, the slot that chose ``action`` (``-1``: none); it
                 learns on-policy wherever ``s`` is.
+            stepped: ``BoolTensor [P]``, the agents that took this step (default all); a head
+                with a replay learner leaves the others' networks alone (an agent that has
+                finished its episodes stops learning, as it would alone).
 
         Returns:
             the TD errors, 0 where nothing was updated.
@@ -174,7 +178,8 @@ class IntraOptionQLearning(nn.Module):
         replay = getattr(q_head, "replay", None)
         if replay is not None:  # stored with its mask, learned from in sampled minibatches
             return replay(q_head, obs, action, reward, next_obs, env_terminated,
-                          target_reached, mask, self.gamma, self.completion_reward)  # fmt: skip
+                          target_reached, mask, self.gamma, self.completion_reward,
+                          alive=stepped)  # fmt: skip
         if not bool(mask.any()):
             return torch.zeros(mask.shape, dtype=torch.float64, device=mask.device)
         checked = code is None  # a caller passing codes vouches for its inputs

@@ -68,7 +68,10 @@ class ReplayTD:
         seed: int (agent p samples with ``seed + p``) or ``LongTensor [P]`` of agent seeds.
 
     ``learner(td [P])`` stores the active agents' rows, takes an optimizer step every
-    ``train_every`` calls on each agent's own minibatch, and returns ``td``'s TD errors ``[P]``
+    ``train_every`` calls on each agent's own minibatch (of the agents in ``td["stepped"]``
+    when it has that key: an agent that finished its episodes stops learning, and its
+    weights, stacked ``[P, ...]``, are held where they are through the step, since Adam's
+    momentum would move them on zero gradients), and returns ``td``'s TD errors ``[P]``
     toward its ``next_value`` (the loss's :meth:`td_error` when it has one: the online
     parameters before the step; 0 for inactive agents).
 
@@ -109,22 +112,31 @@ class ReplayTD:
             self.memory.add(td.detach(), active)
         self.calls += 1
         if self.calls % self.train_every == 0:
-            self._step()
+            stepped = td.get("stepped", None)
+            self._step(None if stepped is None else stepped.to(torch.bool))
         self._copy_written()
         return delta
 
-    def _step(self) -> None:
+    def _step(self, stepped: Tensor | None) -> None:
         self.optimizer.zero_grad()
         if self.memory.started:
             ready = self.memory.count >= self.warmup
+            if stepped is not None:
+                ready = ready & stepped
             batch = self.memory.sample(ready)  # [B, P]
             batch.set("active", batch.get("active").to(torch.bool) & ready)
             self.loss(batch)["loss"].backward()
-        for group in self.optimizer.param_groups:  # no agent warm yet: a step of zeros
-            for param in group["params"]:
-                if param.grad is None:
-                    param.grad = torch.zeros_like(param)
+        params = [p for group in self.optimizer.param_groups for p in group["params"]]
+        for param in params:  # no agent warm yet: a step of zeros
+            if param.grad is None:
+                param.grad = torch.zeros_like(param)
+        held = [] if stepped is None or bool(stepped.all()) else [
+            (param, param.detach()[~stepped].clone()) for param in params
+            if param.ndim and param.shape[0] == stepped.shape[0]]  # fmt: skip
         self.optimizer.step()
+        with torch.no_grad():
+            for param, rows in held:
+                param[~stepped] = rows
         self.updates += 1
         if self.updater is not None:
             self.updater.step()

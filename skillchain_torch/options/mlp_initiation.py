@@ -28,6 +28,7 @@ import math
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.modules.stacked import stacked_affine
 from skillchain_torch.options.initiation import InitiationClassifier
 
 __all__ = ["MLPInitiationClassifier"]
@@ -43,7 +44,7 @@ class MLPInitiationClassifier(InitiationClassifier):
         lr: Adam's step size for each fit (the base class's SGD step suits a linear model only).
 
     The weights of all ``P x K`` networks are stacked (``[P, K, fan_in, fan_out]``) and applied
-    with one ``einsum`` per layer. A slot's hidden layers start uniform in ``+-1/sqrt(fan_in)``
+    with one batched matmul per layer. A slot's hidden layers start uniform in ``+-1/sqrt(fan_in)``
     from a generator keyed by the agent's seed, the slot and its generation (so a reused slot
     starts afresh, the same way in any population); its output layer starts at weight 0 and
     bias ``initial_bias``, so a fresh set's log-odds is ``initial_bias`` everywhere, like the
@@ -84,23 +85,30 @@ class MLPInitiationClassifier(InitiationClassifier):
         obs = self._check_obs(obs)
         lead = obs.shape[1:-1]
         x = 2.0 * obs.reshape(self.population, -1, self.obs_dim) - 1.0  # [P, N, D] in [-1, 1]
-        x = torch.einsum("pnd,pkdo->pkno", x, self.layer_weights[0])
-        x = x + self.layer_biases[0][:, :, None, :]
-        for weight, bias in zip(self.layer_weights[1:], self.layer_biases[1:]):
-            x = torch.einsum("pkni,pkio->pkno", torch.tanh(x), weight) + bias[:, :, None, :]
-        return x[..., 0].transpose(1, 2).reshape(self.population, *lead, self.slots)
+        x = x[:, None].expand(-1, self.slots, -1, -1)  # each slot's network on the same states
+        return self._networks(x, torch.arange(self.population, device=x.device)).transpose(
+            1, 2).reshape(self.population, *lead, self.slots)  # fmt: skip
 
     def own_logits(self, examples: Tensor, agents: Tensor) -> Tensor:
         """``examples [N, K, L, D]`` of agents ``agents [N]`` ``-> [N, K, L]``: slot k's
         network on slot k's examples only (what a fit needs; :meth:`logit` would run every slot
         on every slot's examples of every agent, K x P / N times the work)."""
-        x = 2.0 * examples.to(self.examples.dtype) - 1.0
-        x = torch.einsum("pkld,pkdo->pklo", x, self.layer_weights[0][agents])
-        x = x + self.layer_biases[0][agents][:, :, None, :]
-        for weight, bias in zip(self.layer_weights[1:], self.layer_biases[1:]):
-            x = torch.einsum("pkli,pkio->pklo", torch.tanh(x), weight[agents])
-            x = x + bias[agents][:, :, None, :]
-        return x[..., 0]
+        return self._networks(2.0 * examples.to(self.examples.dtype) - 1.0, agents)
+
+    def _networks(self, x: Tensor, agents: Tensor) -> Tensor:
+        """``x [N, K, L, D]`` (inputs in [-1, 1]) through agent ``agents[n]``'s slot-k network:
+        ``[N, K, L]``, one :func:`~skillchain_torch.modules.stacked.stacked_affine` per layer
+        over the N * K networks (so a network's arithmetic does not depend on how many agents
+        fit together, bit for bit)."""
+        N, K, L = x.shape[:3]
+        x = x.reshape(N * K, L, -1)
+        last = len(self.layer_weights) - 1
+        for i, (weight, bias) in enumerate(zip(self.layer_weights, self.layer_biases)):
+            w, b = weight[agents], bias[agents]  # [N, K, I, O], [N, K, O]
+            x = stacked_affine(x, w.reshape(N * K, *w.shape[2:]), b.reshape(N * K, -1))
+            if i < last:
+                x = torch.tanh(x)
+        return x[..., 0].reshape(N, K, L)
 
     def make_optimizer(self, params: list[nn.Parameter]) -> torch.optim.Optimizer:
         return torch.optim.Adam(params, lr=self.lr)
