@@ -57,9 +57,8 @@ class MLPQHead(nn.Module):
     batched matmul is one kernel per layer for all P agents. The output layer starts at
     zero, so every decision starts at ``Q = 0`` as in the linear head; :meth:`set_values` writes
     a constant value for a decision (the way discovery starts a joining option) by zeroing that
-    decision's output weights and setting its bias. Each agent's arithmetic is the same in any
-    population (:func:`~skillchain_torch.modules.stacked.stacked_affine`), so an agent re-run
-    alone computes the same bits.
+    decision's output weights and setting its bias. Agents are independent, bit for bit within
+    one population size; across sizes the batched matmuls may round the last bits differently.
     """
 
     def __init__(self, num_features: int, num_decisions: int, population: int,

@@ -1,15 +1,12 @@
-"""One affine layer of G stacked networks, with each network's arithmetic its own.
+"""One affine layer of G stacked networks, the bias inside the matmul.
 
 A population holds one small network per agent (or per agent and option slot), their weights
-stacked ``[G, ...]`` and evaluated together. For the runs of a population to be independent
-samples *bit for bit* (an agent re-run alone returns exactly what it returned among others:
-what ``skillchain verify`` checks), each network's arithmetic must not depend on how many
-others share the call. A batched matmul over G gives that: every batch element is the same
-small matmul whatever G is. A broadcast bias does not: its gradient is a sum over the batch
-rows that torch's reduction kernels may order differently for different tensor sizes (seen on
-the option head's output bias: 1e-20 apart between P = 1 and P = 3 after one step, and then
-whole episodes apart). So the bias rides in the matmul: the input gains a column of ones and
-the weight the bias as its last row, and both gradients come out of the matmul's backward.
+stacked ``[G, ...]`` and evaluated together. A broadcast bias's gradient is a sum over the
+batch rows, a reduction whose order torch's kernels may choose by tensor size; here the input
+gains a column of ones and the weight the bias as its last row, so both gradients come out of
+one batched matmul's backward. (Seen on the option head's output bias: 1e-20 apart between an
+agent alone and the same agent among 3 after one step. Batched matmuls themselves may still
+round differently for different G on some shapes, so this removes one P-dependence, not all.)
 
 Example:
     >>> import torch
@@ -18,8 +15,6 @@ Example:
     >>> y = stacked_affine(x, w, b)
     >>> y.shape, torch.allclose(y, x @ w + b[:, None])
     (torch.Size([3, 5, 2]), True)
-    >>> bool((stacked_affine(x[:1], w[:1], b[:1]) == y[:1]).all())  # network 0 alone: same bits
-    True
 """
 
 from __future__ import annotations

@@ -62,9 +62,11 @@ class MLPOptionQHead(OptionQHead):
     a fresh slot has ``Q = 0`` like the linear head. Each slot's loss depends only on its own
     parameters, so masked-out slots receive zero gradient and stay unchanged.
 
-    Not bit-reproducible across population sizes: batched ``matmul`` and autograd reductions
-    may block differently for different P (the initial weights are, the trained ones need not
-    be). Use :class:`FourierOptionQHead` where the population contract matters.
+    Agents are independent (each slot's loss reads only its own parameters, and each agent's
+    replay memory is its own), and within one population size bit for bit; across sizes the
+    batched matmuls may round the last bits differently (the initial weights are the same, the
+    trained ones need not be). Use :class:`FourierOptionQHead` where the population contract
+    matters.
     """
 
     def __init__(

@@ -82,21 +82,22 @@ def test_the_option_heads_replay_keeps_each_agents_learning_its_own():
 
 
 @pytest.mark.slow
-def test_a_neural_agent_runs_the_same_alone_as_in_its_population():
-    """Agent 2 of a population of 3 (seed 0) against the same agent alone (seed 2), 4 Pinball
-    episodes with options created and learning. Before per-agent replay agent 0's returns
-    differed from its second episode. Returns, not weights: batched matmuls may round the last
-    bits differently for different population sizes (so ``verify`` still refuses neural runs)."""
+def test_a_neural_agents_episodes_do_not_depend_on_when_the_others_finish():
+    """The symptom measured on Pinball: the same command for 2 and for 4 episodes. Every
+    agent's first two episodes must be the same, though in the 2-episode run the fastest agent
+    finishes (and stops storing and learning) while the others are still in their second.
+    Same population size on both sides: across sizes, batched matmuls may round the last bits
+    differently (so ``verify`` still refuses neural runs)."""
     from tests.neural.test_neural_pieces import neural_agent
 
-    def run(runs, seed):
-        cfg = TrainConfig(agent="skill-chaining", map="pinball_box", runs=runs, episodes=4,
-                          max_episode_steps=600, seed=seed)  # fmt: skip
-        agent = neural_agent(population=runs, seed=seed)
-        return PopulationTrainer(cfg, agent=agent).train().returns, agent
+    def run(episodes):
+        cfg = TrainConfig(agent="skill-chaining", map="pinball_box", runs=3, episodes=episodes,
+                          max_episode_steps=600, seed=0)  # fmt: skip
+        agent = neural_agent(population=3, seed=0)
+        return PopulationTrainer(cfg, agent=agent).train(), agent
 
-    together, agent = run(3, 0)
+    short, _ = run(2)
+    long, agent = run(4)
     assert bool(agent.bank.live().any()) and agent.bank.q_head.replay.stored > 0
-    for p in (0, 2):
-        alone, _ = run(1, p)
-        assert alone[0].tolist() == together[p].tolist(), p
+    assert len(set(short.lengths[:, :2].sum(1).tolist())) == 3  # they finish at different steps
+    assert short.returns[:, :2].tolist() == long.returns[:, :2].tolist()

@@ -88,12 +88,12 @@ def verify_run(run_dir: str | Path, agents, native: bool | None = None,
     config = TrainConfig.load_json(run_dir / "config.json").resolved()
     replayed = [f"--{f.replace('_', '-')} mlp" for f in ("top_head", "option_head")
                 if getattr(config, f) == "mlp"]  # fmt: skip
-    if replayed:  # batched matmuls round by population size: an agent alone drifts
+    if replayed:  # batched matmuls may round by population size: one agent alone drifts
         raise ValueError(f"{run_dir}: a run with {' and '.join(replayed)} cannot be re-run agent "
-                         f"by agent bit for bit (its networks' batched matmuls may round the "
-                         f"last bits differently for a population of one; "
-                         f"results/neural/README.md); re-run the whole command to reproduce "
-                         f"it")  # fmt: skip
+                         f"by agent bit for bit (each agent has its own replay memory, but its "
+                         f"networks' batched matmuls may round the last bits differently in a "
+                         f"population of one; results/neural/README.md); re-run the whole "
+                         f"command to reproduce it")  # fmt: skip
     returns, lengths = np.load(run_dir / "returns.npy"), np.load(run_dir / "lengths.npy")
     if returns.shape != (config.runs, config.episodes) or lengths.shape != returns.shape:
         raise ValueError(f"{run_dir}: returns.npy {returns.shape} / lengths.npy {lengths.shape} "
