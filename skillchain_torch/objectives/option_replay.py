@@ -92,14 +92,16 @@ class OptionReplay:
         ``delta [P, K]`` of this transition under the current parameters (0 off ``mask``)."""
         from skillchain_torch.objectives.q_learning import option_td_target
 
-        with torch.no_grad():
-            target = option_td_target(reward, head(next_obs).amax(-1), reached, terminated,
-                                      gamma, completion_reward)  # fmt: skip
-            q_sa = head(obs).gather(2, action.to(torch.int64)[:, None, None].expand(
-                -1, head.slots, 1))[..., 0]  # fmt: skip
-            delta = torch.where(mask, target - q_sa, torch.zeros_like(q_sa))
         rows = mask.any(-1)
-        if bool(rows.any()):
+        if not bool(rows.any()):  # no option learns here: nothing to value or store
+            delta = torch.zeros(mask.shape, dtype=torch.float64, device=mask.device)
+        else:
+            with torch.no_grad():
+                target = option_td_target(reward, head(next_obs).amax(-1), reached, terminated,
+                                          gamma, completion_reward)  # fmt: skip
+                q_sa = head(obs).gather(2, action.to(torch.int64)[:, None, None].expand(
+                    -1, head.slots, 1))[..., 0]  # fmt: skip
+                delta = torch.where(mask, target - q_sa, torch.zeros_like(q_sa))
             P = head.population
             item = TensorDict(obs=obs, action=action.to(torch.int64), reward=reward.reshape(P),
                               next_obs=next_obs, terminated=terminated.reshape(P).to(torch.bool),

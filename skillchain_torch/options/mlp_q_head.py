@@ -18,7 +18,7 @@ from torch import Tensor, nn
 from torch.func import stack_module_state
 from torch.nn import functional
 
-from skillchain_torch.modules.stacked import stacked_affine
+from skillchain_torch.modules.stacked import AugmentedCache, augment, augmented_affine
 from skillchain_torch.options.q_head import _DTYPES, NUM_ACTIONS, OBS_DIM, OptionQHead, dtype_name
 from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask
 from skillchain_torch.rng import CounterRNG
@@ -120,6 +120,7 @@ class MLPOptionQHead(OptionQHead):
         self.register_buffer("slot_epoch", torch.zeros(population, slots, dtype=torch.int64,
                                                        device=device))  # fmt: skip
         self.replay = None  # an OptionReplay: learn from sampled minibatches, not each step
+        self._augmented = AugmentedCache()  # (acting forwards reuse the weights between writes)
         self.reset_slots(torch.ones(population, slots, dtype=torch.bool, device=device))
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
@@ -148,17 +149,27 @@ class MLPOptionQHead(OptionQHead):
         lead = x.shape[:-2]
         x = x.reshape(-1, P, x.shape[-1]).transpose(0, 1)  # [P, N, D]
         N = x.shape[1]
-        weight, bias = layers[0]  # [P, K, O, D], [P, K, O]: the first layer, all K at once
-        out = weight.shape[2]
-        x = stacked_affine(x, weight.reshape(P, K * out, -1).transpose(1, 2),
-                           bias.reshape(P, K * out))  # [P, N, K * O]  # fmt: skip
+        augmented = self._augmented.get([t for pair in layers for t in pair],
+                                        lambda: self._augment(layers))  # fmt: skip
+        x = augmented_affine(x, augmented[0])  # [P, N, K * O]: the first layer, all K at once
+        out = layers[0][0].shape[2]
         x = x.reshape(P, N, K, out).transpose(1, 2).reshape(P * K, N, out)
-        for weight, bias in layers[1:]:  # [P * K] networks, each on its agent's N states
-            out = weight.shape[2]
-            x = stacked_affine(torch.tanh(x), weight.reshape(P * K, out, -1).transpose(1, 2),
-                               bias.reshape(P * K, out))  # fmt: skip
-        x = x.reshape(P, K, N, out).permute(2, 0, 1, 3).reshape(*lead, P, K, out)
+        for w in augmented[1:]:  # [P * K] networks, each on its agent's N states
+            x = augmented_affine(torch.tanh(x), w)
+        x = x.reshape(P, K, N, -1).permute(2, 0, 1, 3).reshape(*lead, P, K, -1)
         return x * self.q_scale
+
+    def _augment(self, layers) -> list[Tensor]:
+        """Each layer's weight and bias as one ``[G, in + 1, out]`` matrix: the first over the
+        P agents (all K slots' outputs side by side), the others over the P * K networks."""
+        P, K = self.population, self.slots
+        weight, bias = layers[0]  # [P, K, O, D], [P, K, O]
+        out = [augment(weight.reshape(P, -1, weight.shape[-1]).transpose(1, 2),
+                       bias.reshape(P, -1))]  # fmt: skip
+        for weight, bias in layers[1:]:
+            out.append(augment(weight.reshape(P * K, weight.shape[2], -1).transpose(1, 2),
+                               bias.reshape(P * K, -1)))  # fmt: skip
+        return out
 
     def forward(self, obs: Tensor) -> Tensor:
         self._check_obs(obs)
