@@ -16,9 +16,9 @@ from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
 HERE = Path(__file__).resolve().parent
 PAPER = HERE.parents[1] / "paper" / "simple"
 WINDOWS = [(1, 10), (11, 20), (21, 30), (31, 40), (41, 50)]
-NEURAL = ("flat-neural", "sc-neural", "flat-neural-50", "sc-neural-50", "sc-neural-options-50")
+NEURAL = ("flat-neural-50", "sc-neural-50", "sc-neural-options-50")
 # each neural skill-chaining run against the run it is compared with
-PAIRS = (("sc-neural", "flat-neural"), ("sc-neural-50", "flat-neural-50"),
+PAIRS = (("sc-neural-50", "flat-neural-50"), ("flat-neural-50", "flat (linear)"),
          ("sc-neural-options-50", "flat (linear)"),
          ("sc-neural-options-50", "sc-linear (paper preset)"))
 
