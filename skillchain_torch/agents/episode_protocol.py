@@ -21,6 +21,7 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.backends.native import check_same_kernels
+from skillchain_torch.objectives.option_replay import OptionReplay
 
 __all__ = ["EpisodeProtocol"]
 
@@ -147,7 +148,11 @@ class EpisodeProtocol:
         if "top_learner" in state:
             self.top_learner.load_state_dict(state["top_learner"])
         if "option_replay" in state:
-            self.bank.q_head.replay.load_state_dict(state["option_replay"])
+            replay = self.bank.q_head.replay  # (the built-in one moves to the bank's device)
+            if isinstance(replay, OptionReplay):
+                replay.load_state_dict(state["option_replay"], device=self.bank.status.device)
+            else:
+                replay.load_state_dict(state["option_replay"])
         self.bank.load_state_dict(state["bank"])
         self.rng.load_state_dict(state["rng"])
         self.rng.to(device)

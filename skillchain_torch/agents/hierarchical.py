@@ -219,8 +219,8 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         if not self.closed_form and optimizer is None:
             optimizer = torch.optim.SGD(self.q_head.parameters(), lr=alpha)
         self.optimizer, self.top_learner = optimizer, top_learner
-        if top_learner is not None and self.closed_form:
-            raise ValueError("top_learner needs a head with parameters, not LinearQHead")
+        if top_learner is not None and (self.closed_form or intra_option_primitives):
+            raise ValueError("top_learner needs a parametric head, no intra_option_primitives")
         self.option_update = IntraOptionQLearning(gamma, completion_reward)
         if isinstance(seed, Tensor):
             self.rng = CounterRNG(seed.to(device), stream=AGENT_STREAM)

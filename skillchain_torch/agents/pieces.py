@@ -49,9 +49,10 @@ __all__ = ["INITIATIONS", "OPTION_HEADS", "TOP_HEADS", "TOP_LEARNER", "assemble_
 VALUE_SCALE = 1000.0  # Q / 1000: outputs and TD errors of order 10 (Pinball's goal: 10^4)
 
 
-def _first(seed) -> int:
-    """Agent 0's seed (an int, or the first of per-agent seeds): seeds a learner's sampling."""
-    return int(seed.reshape(-1)[0]) if isinstance(seed, torch.Tensor) else int(seed)
+def _replay_seed(seed, offset: int = 0):
+    """A learner's sampling seed: agent p samples with its own seed (``seed + p`` for an int,
+    ``seed[p]`` for per-agent seeds), plus ``offset``."""
+    return seed.reshape(-1) + offset if isinstance(seed, torch.Tensor) else int(seed) + offset
 
 
 def _mlp_top(population: int, obs_dim: int, num_decisions: int, gamma: float, seed: int,
@@ -67,7 +68,8 @@ def _mlp_top(population: int, obs_dim: int, num_decisions: int, gamma: float, se
                          delay_value=True, bootstrap=bootstrap)  # fmt: skip
     optimizer = torch.optim.Adam(head.parameters(), lr=lr)
     learner = ReplayTD(loss, optimizer, capacity=50_000, batch_size=32,
-                       target_update=target_update, train_every=4, seed=_first(seed))  # fmt: skip
+                       target_update=target_update, train_every=4,
+                       seed=_replay_seed(seed))  # fmt: skip
     return {"q_head": head, "features": nn.Identity(), "top_learner": learner}
 
 
@@ -77,7 +79,7 @@ def _mlp_option_head(population: int, slots: int, num_actions: int, obs_dim: int
                           lr=0.01, q_scale=VALUE_SCALE, seed=seed, device=device,
                           obs_dim=obs_dim)  # fmt: skip
     head.replay = OptionReplay(capacity=50_000, batch_size=32, train_every=4,
-                               target_update=250, seed=_first(seed) + 1)  # fmt: skip
+                               target_update=250, seed=_replay_seed(seed, 1))  # fmt: skip
     return head
 
 

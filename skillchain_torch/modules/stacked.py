@@ -46,8 +46,9 @@ class AugmentedCache:
 
     A module's acting forwards (no gradient) rebuild the same augmented weights every step
     between two updates; :meth:`get` returns the last ones while every tensor is the same
-    object at the same version (``Tensor._version`` counts in-place writes, including through
-    views). It holds the tensors, so an address cannot be reused by another tensor while its
+    object at the same version and address (``Tensor._version`` counts in-place writes,
+    including through views; a ``.data`` swap keeps the version but moves the address). It
+    holds the tensors, so an address cannot be reused by another tensor while its
     entry lives. Where a gradient is wanted it always builds afresh.
 
     Example:
@@ -68,7 +69,7 @@ class AugmentedCache:
     def get(self, tensors, build):
         if torch.is_grad_enabled() and any(t.requires_grad for t in tensors):
             return build()
-        versions = tuple(t._version for t in tensors)
+        versions = tuple((t._version, t.data_ptr()) for t in tensors)  # (.data swaps: new ptr)
         entry = self._entries.get(id(tensors[0]))
         if (entry is not None and len(entry[0]) == len(tensors) and entry[1] == versions
                 and all(a is b for a, b in zip(entry[0], tensors))):  # fmt: skip

@@ -123,7 +123,9 @@ class AgentReplayStorage:
                 "storage": None if self.storage is None else self.storage.state_dict(),
                 "count": self.count, "rng": None if self.rng is None else self.rng.state_dict()}
 
-    def load_state_dict(self, state: dict) -> None:
+    def load_state_dict(self, state: dict, device: torch.device | str | None = None) -> None:
+        """Restore :meth:`state_dict`'s state, on ``device`` (default: where it was saved; a
+        checkpoint read with ``map_location="cpu"`` needs the learner's device here)."""
         if state.get("format") != "per-agent":
             raise ValueError("this checkpoint's replay memory is shared by the population (saved "
                              "before per-agent replay, results/neural/README.md): it cannot be "
@@ -133,10 +135,17 @@ class AgentReplayStorage:
         if state["storage"] is None:
             self.storage = self.count = self.rng = None
             return
-        self.count = state["count"].clone()
+        device = state["count"].device if device is None else torch.device(device)
+        self.count = state["count"].clone().to(device)
         P = self.count.shape[0]
-        self.storage = LazyTensorStorage(P * self.capacity, device=self.count.device)
-        self.storage.load_state_dict(state["storage"])
+        saved = LazyTensorStorage(P * self.capacity)
+        saved.load_state_dict(state["storage"])
+        if torch.device(saved.device) == device:
+            self.storage = saved
+        else:  # moved through the storage's own get/set (its layout stays TorchRL's business)
+            places = torch.arange(P * self.capacity)
+            self.storage = LazyTensorStorage(P * self.capacity, device=device)
+            self.storage.set(places.to(device), saved.get(places).to(device))
         self.rng = CounterRNG(torch.zeros(P, dtype=torch.int64))
         self.rng.load_state_dict(state["rng"])
-        self.rng.to(self.count.device)
+        self.rng.to(device)

@@ -162,9 +162,16 @@ class OptionReplay:
         return {"memory": self.memory.state_dict(), "calls": self.calls,
                 "updates": self.updates, "target": self.target, "epochs": self._epochs}
 
-    def load_state_dict(self, state: dict) -> None:
+    def load_state_dict(self, state: dict, device: torch.device | str | None = None) -> None:
+        """Restore :meth:`state_dict`'s state, on ``device`` (default: where it was saved)."""
         if "memory" not in state:
             AgentReplayStorage(1, 1).load_state_dict(state)  # (raises: the shared format)
-        self.memory.load_state_dict(state["memory"])
-        self.calls, self.updates = int(state["calls"]), state["updates"]
-        self.target, self._epochs = state["target"], state["epochs"]
+        self.memory.load_state_dict(state["memory"], device=device)
+
+        def moved(t):
+            return t if t is None or device is None else t.to(device)
+
+        self.calls, self.updates = int(state["calls"]), moved(state["updates"])
+        self._epochs = moved(state["epochs"])
+        self.target = (None if state["target"] is None else
+                       [(moved(w), moved(b)) for w, b in state["target"]])  # fmt: skip

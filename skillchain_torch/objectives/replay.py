@@ -151,9 +151,8 @@ class ReplayTD:
         writes = getattr(head, "writes", None)
         if writes is None or self.updater is None:
             return
-        if self._writes is None:
-            self._writes = writes.clone()
-            return
+        if self._writes is None:  # (before the first call no write was copied)
+            self._writes = torch.zeros_like(writes)
         changed = writes != self._writes
         if not bool(changed.any()):
             return
@@ -178,10 +177,12 @@ class ReplayTD:
     def load_state_dict(self, state: dict) -> None:
         if "memory" not in state:
             AgentReplayStorage(1, 1).load_state_dict(state)  # (raises: the shared format)
-        self.memory.load_state_dict(state["memory"])
+        device = next(iter(self.loss.parameters()), torch.zeros(())).device
+        self.memory.load_state_dict(state["memory"], device=device)
         self.optimizer.load_state_dict(state["optimizer"])
         self.updates, self.calls = int(state["updates"]), int(state["calls"])
-        self._writes = state["writes"]
+        writes = state["writes"]
+        self._writes = writes if writes is None else writes.to(device)
         self.loss.load_state_dict(state["targets"])
         if self.updater is not None:
             self.updater.counter = int(state["counter"])

@@ -98,8 +98,8 @@ class MLPInitiationClassifier(InitiationClassifier):
     def _networks(self, x: Tensor, agents: Tensor) -> Tensor:
         """``x [N, K, L, D]`` (inputs in [-1, 1]) through agent ``agents[n]``'s slot-k network:
         ``[N, K, L]``, one :func:`~skillchain_torch.modules.stacked.stacked_affine` per layer
-        over the N * K networks (so a network's arithmetic does not depend on how many agents
-        fit together, bit for bit)."""
+        over the N * K networks. (Which agents fit together, and so the batch shape, depends on
+        when their episodes end; a batched matmul may round differently for another shape.)"""
         N, K, L = x.shape[:3]
         x = x.reshape(N * K, L, -1)
         last = len(self.layer_weights) - 1

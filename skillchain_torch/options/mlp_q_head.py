@@ -140,9 +140,8 @@ class MLPOptionQHead(OptionQHead):
 
     def _values(self, obs: Tensor, layers=None) -> Tensor:
         """``obs [*B, P, D] -> Q [*B, P, K, A]``: every (agent, slot) network at once, each on
-        its agent's states (one :func:`~skillchain_torch.modules.stacked.stacked_affine` per
-        layer: each network's arithmetic is the same in any population, so an agent alone
-        computes what it computes among others, bit for bit)."""
+        its agent's states (one batched matmul per layer, the bias inside it:
+        :mod:`skillchain_torch.modules.stacked`)."""
         layers = self._layers() if layers is None else layers
         P, K = self.population, self.slots
         x = (obs.to(self._dtype) * 2.0 - 1.0)  # observations in [0, 1] -> [-1, 1]

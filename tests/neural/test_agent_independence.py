@@ -12,7 +12,7 @@ from tensordict import TensorDict
 
 from skillchain_torch.modules import MLPQHead
 from skillchain_torch.objectives import IntraOptionQLearning, OptionReplay, ReplayTD, SMDPSarsaLoss
-from skillchain_torch.options import MLPOptionQHead
+from skillchain_torch.options import MLPInitiationClassifier, MLPOptionQHead, OptionBank
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
 F64 = torch.float64
@@ -101,3 +101,93 @@ def test_a_neural_agents_episodes_do_not_depend_on_when_the_others_finish():
     assert bool(agent.bank.live().any()) and agent.bank.q_head.replay.stored > 0
     assert len(set(short.lengths[:, :2].sum(1).tolist())) == 3  # they finish at different steps
     assert short.returns[:, :2].tolist() == long.returns[:, :2].tolist()
+
+
+def test_the_learners_resume_bit_for_bit_from_their_state():
+    """Saved after 70 calls and loaded into fresh learners (on an explicit device, as the
+    agent does with a checkpoint read onto the CPU): the next 50 calls give the same weights
+    as 120 uninterrupted ones."""
+    def option_learner(steps, state=None):
+        head = MLPOptionQHead(2, 2, hidden=8, lr=0.05, q_scale=100.0, seed=5)
+        head.replay = OptionReplay(batch_size=4, train_every=2, target_update=5, seed=9)
+        if state is not None:
+            head.load_state_dict(state[0])
+            head.replay.load_state_dict(state[1], device="cpu")
+        update = IntraOptionQLearning(gamma=1.0, completion_reward=100.0)
+        g = torch.Generator().manual_seed(0)
+        for t in range(steps):
+            obs = torch.rand(2, 4, generator=g, dtype=F64)
+            if state is not None and t < 70:
+                continue  # (the saved run took these)
+            learn = torch.tensor([[t % 2 == 0, True], [t % 3 == 0, False]])
+            update(head, obs, torch.tensor([t % 5, 1]), -torch.ones(2, dtype=F64), obs.flip(0),
+                   torch.zeros(2, dtype=torch.bool), learn,
+                   torch.tensor([[t % 5 == 0, False], [False, t % 3 == 0]]))  # fmt: skip
+        return head
+
+    first = option_learner(70)
+    state = (first.state_dict(), first.replay.state_dict())
+    resumed, uninterrupted = option_learner(120, state), option_learner(120)
+    assert all(torch.equal(a, b) for a, b in zip(resumed.params.values(),
+                                                 uninterrupted.params.values()))  # fmt: skip
+    assert int(resumed.replay.updates.min()) > 0
+
+
+def test_a_write_before_the_first_call_reaches_the_target():
+    head = MLPQHead(2, 3, 2, hidden=8, value_scale=10.0)
+    loss = SMDPSarsaLoss(head, loss_function="smooth_l1", value_scale=10.0, delay_value=True)
+    learner = ReplayTD(loss, torch.optim.Adam(head.parameters(), lr=1e-2), batch_size=4,
+                       target_update=10_000)  # fmt: skip
+    head.set_values(torch.tensor([[False, False, True], [False, False, False]]),
+                    torch.full((2, 3), 77.0, dtype=F64))  # agent 0 only
+    phi = torch.zeros(2, 2, dtype=F64)
+    learner(TensorDict(phi=phi, decision=torch.tensor([0, 1]), decision_return=torch.ones(2),
+                       duration=torch.ones(2, dtype=torch.long), next_value=torch.zeros(2),
+                       terminated=torch.tensor([False, False]),
+                       active=torch.tensor([True, True]), next_phi=phi,
+                       next_decision=torch.tensor([2, 2]), batch_size=[2]).to(F64))  # fmt: skip
+    with loss.target_value_head_params.to_module(head):
+        assert head(phi)[:, 2].tolist() == [77.0, 0.0]  # agent 1's target was not copied
+
+
+def test_per_agent_seeds_reach_the_replay_streams_and_bad_combinations_are_refused():
+    from skillchain_torch.agents import SkillChainingAgent
+    from skillchain_torch.agents.pieces import _replay_seed
+
+    assert _replay_seed(7, 1) == 8
+    assert _replay_seed(torch.tensor([5, 9]), 1).tolist() == [6, 10]
+    head = MLPQHead(4, 17, 2, hidden=8)
+    loss = SMDPSarsaLoss(head, loss_function="smooth_l1", value_scale=1000.0, delay_value=True)
+    learner = ReplayTD(loss, torch.optim.Adam(head.parameters()), batch_size=4)
+    bank = OptionBank(2, 2, MLPOptionQHead(2, 2, hidden=4),
+                      MLPInitiationClassifier(2, 2, capacity=8, hidden=4))  # fmt: skip
+    with pytest.raises(ValueError, match="no intra_option_primitives"):
+        SkillChainingAgent(bank, q_head=head, features=torch.nn.Identity(), top_learner=learner,
+                           intra_option_primitives=True)  # fmt: skip
+
+
+@pytest.mark.parametrize("device", [
+    "cpu", pytest.param("cuda", marks=[pytest.mark.cuda, pytest.mark.skipif(
+        not torch.cuda.is_available(), reason="no CUDA device on this machine")])])
+def test_a_neural_run_resumes_from_its_checkpoint_on_its_device(tmp_path, device):
+    """A checkpoint is read onto the CPU; the replay memories, targets and counters go back to
+    the run's device (on CUDA they stayed on the CPU and the next step mixed devices)."""
+    from skillchain_torch.trainers.checkpoint import resume_checkpoint
+
+    def config(episodes=3):
+        return TrainConfig(agent="skill-chaining", preset="paper", map="pinball_box", runs=2,
+                           episodes=episodes, max_episode_steps=150, gestation=1, seed=3,
+                           checkpoint_every=1, device=device, top_head="mlp", option_head="mlp",
+                           initiation="mlp", epsilon_init=1.0, annealing_steps=100)  # fmt: skip
+
+    whole = PopulationTrainer(config(3)).train()
+    part = PopulationTrainer(config(3), out_dir=tmp_path)  # interrupted after 2 episodes
+    part.train(max_agent_steps=1)
+    while part.episodes_done.min() < 2:
+        part.train(max_agent_steps=part.agent_steps + 1)
+    resumed = PopulationTrainer(config(3), out_dir=tmp_path)
+    resume_checkpoint(tmp_path, resumed)
+    memory = resumed.agent.top_learner.memory
+    assert memory.count.device.type == device and memory.rng.seeds.device.type == device
+    resumed.train()
+    assert resumed.returns.tolist() == whole.returns.tolist()
