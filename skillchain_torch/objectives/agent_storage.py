@@ -44,7 +44,19 @@ from torchrl.data import LazyTensorStorage
 from skillchain_torch.options.status import agent_seeds
 from skillchain_torch.rng import CounterRNG
 
-__all__ = ["AgentReplayStorage"]
+__all__ = ["AgentReplayStorage", "saved_memory"]
+
+SHARED_FORMAT = ("this checkpoint's replay memory is shared by the population (saved before "
+                 "per-agent replay, results/neural/README.md): it cannot be resumed; re-run the "
+                 "command without --resume")
+
+
+def saved_memory(state: dict) -> dict:
+    """A learner's saved :class:`AgentReplayStorage` state (``state["memory"]``); a learner
+    saved before per-agent replay is refused in one line."""
+    if "memory" not in state:
+        raise ValueError(SHARED_FORMAT)
+    return state["memory"]
 
 
 class AgentReplayStorage:
@@ -127,9 +139,7 @@ class AgentReplayStorage:
         """Restore :meth:`state_dict`'s state, on ``device`` (default: where it was saved; a
         checkpoint read with ``map_location="cpu"`` needs the learner's device here)."""
         if state.get("format") != "per-agent":
-            raise ValueError("this checkpoint's replay memory is shared by the population (saved "
-                             "before per-agent replay, results/neural/README.md): it cannot be "
-                             "resumed; re-run the command without --resume")  # fmt: skip
+            raise ValueError(SHARED_FORMAT)
         if int(state["capacity"]) != self.capacity:
             raise ValueError(f"checkpoint replay capacity {state['capacity']} != {self.capacity}")
         if state["storage"] is None:

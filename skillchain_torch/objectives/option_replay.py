@@ -36,7 +36,7 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
-from skillchain_torch.objectives.agent_storage import AgentReplayStorage
+from skillchain_torch.objectives.agent_storage import AgentReplayStorage, saved_memory
 
 __all__ = ["OptionReplay"]
 
@@ -164,9 +164,7 @@ class OptionReplay:
 
     def load_state_dict(self, state: dict, device: torch.device | str | None = None) -> None:
         """Restore :meth:`state_dict`'s state, on ``device`` (default: where it was saved)."""
-        if "memory" not in state:
-            AgentReplayStorage(1, 1).load_state_dict(state)  # (raises: the shared format)
-        self.memory.load_state_dict(state["memory"], device=device)
+        self.memory.load_state_dict(saved_memory(state), device=device)
 
         def moved(t):
             return t if t is None or device is None else t.to(device)

@@ -44,7 +44,7 @@ from tensordict import TensorDictBase
 from torch import Tensor
 from torchrl.objectives import HardUpdate, LossModule
 
-from skillchain_torch.objectives.agent_storage import AgentReplayStorage
+from skillchain_torch.objectives.agent_storage import AgentReplayStorage, saved_memory
 
 __all__ = ["ReplayTD"]
 
@@ -175,10 +175,8 @@ class ReplayTD:
                 "counter": getattr(self.updater, "counter", 0)}  # fmt: skip
 
     def load_state_dict(self, state: dict) -> None:
-        if "memory" not in state:
-            AgentReplayStorage(1, 1).load_state_dict(state)  # (raises: the shared format)
         device = next(iter(self.loss.parameters()), torch.zeros(())).device
-        self.memory.load_state_dict(state["memory"], device=device)
+        self.memory.load_state_dict(saved_memory(state), device=device)
         self.optimizer.load_state_dict(state["optimizer"])
         self.updates, self.calls = int(state["updates"]), int(state["calls"])
         writes = state["writes"]

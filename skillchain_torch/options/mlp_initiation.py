@@ -86,8 +86,7 @@ class MLPInitiationClassifier(InitiationClassifier):
         lead = obs.shape[1:-1]
         x = 2.0 * obs.reshape(self.population, -1, self.obs_dim) - 1.0  # [P, N, D] in [-1, 1]
         x = x[:, None].expand(-1, self.slots, -1, -1)  # each slot's network on the same states
-        return self._networks(x, torch.arange(self.population, device=x.device)).transpose(
-            1, 2).reshape(self.population, *lead, self.slots)  # fmt: skip
+        return self._networks(x).transpose(1, 2).reshape(self.population, *lead, self.slots)
 
     def own_logits(self, examples: Tensor, agents: Tensor) -> Tensor:
         """``examples [N, K, L, D]`` of agents ``agents [N]`` ``-> [N, K, L]``: slot k's
@@ -95,8 +94,9 @@ class MLPInitiationClassifier(InitiationClassifier):
         on every slot's examples of every agent, K x P / N times the work)."""
         return self._networks(2.0 * examples.to(self.examples.dtype) - 1.0, agents)
 
-    def _networks(self, x: Tensor, agents: Tensor) -> Tensor:
-        """``x [N, K, L, D]`` (inputs in [-1, 1]) through agent ``agents[n]``'s slot-k network:
+    def _networks(self, x: Tensor, agents: Tensor | None = None) -> Tensor:
+        """``x [N, K, L, D]`` (inputs in [-1, 1]) through agent ``agents[n]``'s slot-k network
+        (every agent's, in order, without ``agents``: no copy of the weights every step):
         ``[N, K, L]``, one :func:`~skillchain_torch.modules.stacked.stacked_affine` per layer
         over the N * K networks. (Which agents fit together, and so the batch shape, depends on
         when their episodes end; a batched matmul may round differently for another shape.)"""
@@ -104,7 +104,7 @@ class MLPInitiationClassifier(InitiationClassifier):
         x = x.reshape(N * K, L, -1)
         last = len(self.layer_weights) - 1
         for i, (weight, bias) in enumerate(zip(self.layer_weights, self.layer_biases)):
-            w, b = weight[agents], bias[agents]  # [N, K, I, O], [N, K, O]
+            w, b = (weight, bias) if agents is None else (weight[agents], bias[agents])
             x = stacked_affine(x, w.reshape(N * K, *w.shape[2:]), b.reshape(N * K, -1))
             if i < last:
                 x = torch.tanh(x)

@@ -191,3 +191,12 @@ def test_a_neural_run_resumes_from_its_checkpoint_on_its_device(tmp_path, device
     assert memory.count.device.type == device and memory.rng.seeds.device.type == device
     resumed.train()
     assert resumed.returns.tolist() == whole.returns.tolist()
+
+
+def test_a_learner_saved_with_the_shared_memory_is_refused_in_one_line():
+    loss = SMDPSarsaLoss(MLPQHead(2, 3, 2, hidden=4), value_scale=10.0, delay_value=True)
+    old = {"buffer": {}, "generator": None, "stored": 3, "updates": 0}
+    for learner in (OptionReplay(), ReplayTD(loss, torch.optim.Adam(loss.parameters()))):
+        with pytest.raises(ValueError, match="^this checkpoint's replay memory is shared by the "
+                                             "population .*without --resume$"):  # fmt: skip
+            learner.load_state_dict(old)
