@@ -37,7 +37,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional
 
-__all__ = ["PROBE_POINTS", "gradient_fit", "points_logit", "probe", "snapshot"]
+__all__ = ["PROBE_POINTS", "check_fittable", "gradient_fit", "points_logit", "probe", "snapshot"]
 
 PROBE_POINTS = 64  # states where a model's logits are compared between episodes
 
@@ -68,14 +68,29 @@ def _own_slot_logits(clf, examples: Tensor) -> Tensor:
     return z.diagonal(dim1=1, dim2=3).permute(0, 2, 1)  # [P, L, K] -> [P, K, L]
 
 
+def check_fittable(clf) -> None:
+    """``ValueError`` (one line) for a subclass whose own model ``fit`` cannot train: it
+    overrides ``logit`` or ``phi``, keeps the built-in ``fit``, and has no parameter with
+    ``requires_grad`` (the built-in ``weight``/``bias`` have none: their closed-form fit serves
+    the built-in model only). :class:`~skillchain_torch.options.OptionBank` checks as it is
+    built, so a run does not fail at its first fit."""
+    from .initiation import InitiationClassifier
+
+    if clf.builtin_model() or type(clf).fit is not InitiationClassifier.fit:
+        return
+    if not any(p.requires_grad for p in clf.parameters()):
+        raise ValueError(
+            f"{type(clf).__name__} overrides logit but has no parameter with requires_grad="
+            "True, so fit has nothing to train: give it parameters of its own (an nn.Module "
+            "or nn.Parameter) or override fit")
+
+
 def gradient_fit(clf, mask: Tensor, length: int) -> None:
     """``clf.sweeps`` optimizer steps on the summed per-slot mean log-loss of the slots in
     ``mask [P, K]`` over their first ``length`` stored places. Raises ``ValueError`` if the
     model has nothing to train."""
+    check_fittable(clf)
     params = [p for p in clf.parameters() if p.requires_grad]
-    if not params:
-        raise ValueError(f"{type(clf).__name__} overrides logit but has no parameter with "
-                         "requires_grad=True: nothing to fit")  # fmt: skip
     # A model with own_logits(examples, agents) computes only the agents that fit (episodes
     # end a few agents at a time); the others' parameters get no gradient, so no step.
     rows = mask.any(-1).nonzero()[:, 0] if hasattr(clf, "own_logits") else None

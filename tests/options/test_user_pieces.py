@@ -260,3 +260,26 @@ def test_builtins_satisfy_the_interfaces():
 @pytest.mark.parametrize("module", [interfaces, select, initiation_fit, options_io])
 def test_docstring_examples(module):
     assert doctest.testmod(module, raise_on_error=True).attempted > 0
+
+
+def test_a_subclass_that_cannot_learn_is_refused_when_the_bank_is_built():
+    """Overriding ``logit`` on the built-in weights (which have no gradient) used to build, run
+    and then fail at the first fit, mid-run; now the bank refuses it in one line, and the same
+    class with a trainable parameter is accepted."""
+
+    class Wrapped(InitiationClassifier):
+        def logit(self, obs):
+            return super().logit(obs)
+
+    with pytest.raises(ValueError, match="Wrapped overrides logit but has no parameter"):
+        OptionBank(2, 2, FourierOptionQHead(2, 2, order=1),
+                   Wrapped(population=2, slots=2, capacity=8))  # fmt: skip
+
+    class Trainable(Wrapped):
+        def __init__(self, **kwargs):
+            super().__init__(**kwargs)
+            self.weight.requires_grad_()
+
+    bank = OptionBank(2, 2, FourierOptionQHead(2, 2, order=1),
+                      Trainable(population=2, slots=2, capacity=8))  # fmt: skip
+    assert isinstance(bank.classifier, Trainable)
