@@ -20,6 +20,8 @@ _EXPORTS = {
     "EnvStepper": "env_stepper",
     "EpisodeBatch": "population",
     "PopulationTrainer": "population",
+    "train_and_write": "run_outputs",
+    "check_agent": "user_agent",
     "STAGES": "population",
     "FORMAT_VERSION": "checkpoint",
     "latest_checkpoint": "checkpoint",

@@ -26,10 +26,12 @@ import math
 from pathlib import Path
 
 import numpy as np
+from torch.utils.tensorboard.summary import hparams
 from torchrl.record.loggers import TensorboardLogger
 
 from .plots import t95
 from .timed import TimedHook
+from .user_agent import agent_label, recorded_config
 
 __all__ = ["TensorBoardHook", "population_interval", "experiment_name", "log_population_arrays"]
 
@@ -48,15 +50,25 @@ def population_interval(values) -> tuple[float, float, float]:
     return mean, mean - half, mean + half
 
 
-def experiment_name(config) -> str:
+def experiment_name(config, agent: str | None = None) -> str:
+    """The run's folder under ``tb/``: agent (``agent``, else the config's kind), env, size,
+    seed."""
     name = config.env_name.replace(":", "-").replace("/", "-")
-    return f"{config.agent}_{name}_P{config.runs}_seed{config.seed}"
+    return f"{agent or config.agent}_{name}_P{config.runs}_seed{config.seed}"
 
 
-def log_config(logger, config) -> None:
-    """The hyperparameters and a text table of ``config`` (once, at a run's start)."""
-    config = config.to_dict()
-    logger.log_hparams({k: v if v is not None else "None" for k, v in config.items()})
+def log_config(logger, config, agent=None) -> None:
+    """The hyperparameters and a text table of ``config`` (once, at a run's start); for an
+    agent of the user's own, the fields :func:`.user_agent.recorded_config` keeps."""
+    config = recorded_config(config, agent)
+    values = {k: v if isinstance(v, (bool, int, float, str)) else str(v)
+              for k, v in config.items()}  # None and lists as text, as TensorBoard shows them
+    # TorchRL's log_hparams calls SummaryWriter.add_hparams, which writes into a new
+    # timestamped run beside this one (an empty run in TensorBoard's list): the same summary
+    # goes into this run's own writer instead.
+    writer = logger.experiment._get_file_writer()
+    for summary in hparams(values, metric_dict={}):
+        writer.add_summary(summary)
     rows = "\n".join(f"| {k} | {v} |" for k, v in config.items())
     logger.experiment.add_text("config", "| field | value |\n|---|---|\n" + rows, 0)
 
@@ -118,7 +130,8 @@ class TensorBoardHook(TimedHook):
     def for_run(cls, trainer, out_dir: str | Path, **kwargs) -> TensorBoardHook:
         """A hook logging to ``out_dir/tb/<experiment name>``."""
         log_dir = str(Path(out_dir) / "tb")
-        logger = TensorboardLogger(experiment_name(trainer.config), log_dir=log_dir)
+        logger = TensorboardLogger(experiment_name(trainer.config, agent_label(trainer)),
+                                   log_dir=log_dir)  # fmt: skip
         return cls(logger, **kwargs)
 
     def register(self, trainer, name: str = "tensorboard") -> None:
@@ -135,7 +148,8 @@ class TensorBoardHook(TimedHook):
         self._last = (trainer.wall_time, trainer.agent_steps)
         if trainer.global_step > 0:
             return  # resumed: the hyperparameters are already logged
-        log_config(self.logger, trainer.config)
+        log_config(self.logger, trainer.config,
+                   trainer.agent if getattr(trainer, "user_agent", False) else None)
 
     def _post_episodes(self, trainer, batch) -> None:
         log = self.logger.log_scalar

@@ -35,6 +35,7 @@ weights, so the last one written is good, and saves the returns so far as
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +52,7 @@ from .agents import make_agent
 from .config import TrainConfig
 from .divergence import Diverged, DivergenceCheck
 from .env_stepper import EnvStepper
+from .user_agent import check_agent, recorded_config
 
 __all__ = ["PopulationTrainer", "EpisodeBatch", "STAGES", "Diverged", "DIVERGED_OUTPUTS"]
 
@@ -133,11 +135,11 @@ class PopulationTrainer(DivergenceCheck):
             self.env = envs
             self.stepper = EnvStepper(envs, sizes, seed=config.seed,
                                       max_episode_steps=config.max_episode_steps)
+        self.user_agent = agent is not None  # built by the user: config.json says so
         if agent is None:
             agent = make_agent(config, device=self.device, native=native)
-        elif int(agent.population) != config.runs:
-            raise ValueError(f"the agent holds {agent.population} agents but the config asks "
-                             f"for runs={config.runs}")  # fmt: skip
+        else:
+            check_agent(agent, config)
         self.agent = agent
         bank = getattr(self.agent, "bank", None)
         if bank is not None and bank.map is None and not bank.legacy:
@@ -331,12 +333,15 @@ class PopulationTrainer(DivergenceCheck):
         return path
 
     def write_results(self, out_dir: str | Path | None = None) -> None:
-        """``returns.npy`` (float64 [P, E]), ``lengths.npy`` (int64) and ``config.json``."""
+        """``returns.npy`` (float64 [P, E]), ``lengths.npy`` (int64) and ``config.json`` (for
+        an agent of your own, its agent fields ``null``: :func:`.user_agent.recorded_config`).
+        ``skillchain_torch.trainers.train_and_write`` writes every output the CLI writes."""
         out = Path(out_dir) if out_dir is not None else self.out_dir
         out.mkdir(parents=True, exist_ok=True)
         np.save(out / "returns.npy", self.returns)
         np.save(out / "lengths.npy", self.lengths)
-        self.config.save_json(out / "config.json")
+        config = recorded_config(self.config, self.agent if self.user_agent else None)
+        (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:

@@ -17,6 +17,8 @@ from collections import deque
 
 from tqdm.auto import tqdm
 
+from .user_agent import agent_label
+
 __all__ = ["ProgressBar"]
 
 
@@ -47,7 +49,8 @@ class ProgressBar:
         cfg = trainer.config
         done = int(trainer.episodes_done.sum())
         self.bar = tqdm(total=cfg.runs * cfg.episodes, initial=done, unit="ep",
-                        desc=f"{cfg.agent} {cfg.env_name}", dynamic_ncols=True, **self.tqdm_kwargs)
+                        desc=f"{agent_label(trainer)} {cfg.env_name}", dynamic_ncols=True,
+                        **self.tqdm_kwargs)  # fmt: skip
 
     def post_episodes(self, trainer, batch) -> None:
         self.recent.extend(batch.returns)

@@ -17,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 
+from .user_agent import agent_label
+
 __all__ = ["OUTPUTS", "train_and_write", "source_commit", "write_discovery"]
 
 OUTPUTS = (
@@ -51,13 +53,24 @@ def _interrupted(out: Path, every: int) -> str:
             f"same command again with --overwrite")
 
 
-def train_and_write(trainer, out: Path, quiet: bool) -> int:
+def train_and_write(trainer, out: str | Path, quiet: bool = False) -> int:
+    """Train ``trainer`` with the CLI's monitoring (TensorBoard under ``out/tb``, the discovery
+    log, a progress bar) and write every output ``skillchain train`` writes into ``out``; returns
+    the command's exit status (0; 130 after Ctrl-C, with how to resume). The same call for an
+    agent of your own (``PopulationTrainer(config, out_dir=out, agent=agent)``).
+
+    Example (a few seconds)::
+
+        trainer = PopulationTrainer(TrainConfig(runs=2, episodes=3), out_dir="runs/mine")
+        train_and_write(trainer, "runs/mine")   # returns.npy, learning_curve.png, tb/, ...
+    """
     import torch
 
     from .logging import TensorBoardHook
     from .plots import save_learning_curve
     from .progress import ProgressBar
 
+    out = Path(out)
     tb = TensorBoardHook.for_run(trainer, out)
     tb.register(trainer)
     discovery = None
@@ -91,7 +104,7 @@ def train_and_write(trainer, out: Path, quiet: bool) -> int:
     save_learning_curve(
         trainer.returns,
         out / "learning_curve.png",
-        title=f"{cfg.agent} on {cfg.env_name} ({cfg.runs} runs)",
+        title=f"{agent_label(trainer)} on {cfg.env_name} ({cfg.runs} runs)",
     )
     info = {
         "wall_time_s": trainer.elapsed,
