@@ -13,9 +13,11 @@ Example:
     >>> run = ShardedRun(config, Path(tempfile.mkdtemp()), [(0, 2), (2, 3)])
     >>> records = {span: run_block(block_config(config, *span, run.block_dir(span)),
     ...                            run.block_dir(span)) for span in run.spans}
-    >>> info = merge_blocks(run, records, workers=2, wall=1.0)
+    >>> info = merge_blocks(run, records, workers=2, wall=1.0, commit="0123abc")
     >>> np.load(run.out / "returns.npy").shape, info["blocks"], info["block_size"]
     ((3, 1), 2, 2)
+    >>> json.loads((run.out / "run_info.json").read_text())["commit"]  # the driver's, not ours
+    '0123abc'
 """
 
 from __future__ import annotations
@@ -31,8 +33,13 @@ from .config import TrainConfig
 __all__ = ["merge_blocks", "block_trajectory"]
 
 
-def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float) -> dict:
-    """Write ``run.out``'s one-process outputs from its finished blocks; returns run_info."""
+def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float,
+                 commit: str | None = None) -> dict:  # fmt: skip
+    """Write ``run.out``'s one-process outputs from its finished blocks; returns run_info.
+
+    ``commit``: the code the run ran, as the driver read it when it started (the merge is a
+    Ray task in another process, where :func:`.run_outputs.source_commit` would read the
+    checkout as it is at the end of the run); ``None``: read it here."""
     import platform
 
     import torch
@@ -67,7 +74,7 @@ def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float) -> d
         "threads": 1,
         "compiled_agent": all(r.get("compiled_agent", False) for r in records.values()),
         "machine": platform.processor() or platform.machine(),
-        "commit": source_commit(),
+        "commit": source_commit() if commit is None else commit,
     }
     (out / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")
     np.save(out / "returns.npy", returns)  # last: a sweep takes returns.npy as "complete"

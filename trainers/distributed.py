@@ -36,6 +36,7 @@ import time
 from .block_merge import merge_blocks
 from .block_run import run_block
 from .blocks import ShardedRun, block_config
+from .run_outputs import source_commit
 
 __all__ = ["require_ray", "run_sharded", "RAY_MISSING"]
 
@@ -100,6 +101,7 @@ def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None
     # No CPU of its own: it mostly writes files, and its replays are tasks that take one.
     merge = ray.remote(num_cpus=0, max_retries=3)(merge_blocks)
     progress = ray.remote(num_cpus=0)(_Progress).remote()
+    commit = source_commit()  # the driver's, read as the command started (cli.py)
     clock = time.perf_counter()
     todo = [(i, span) for i, run in enumerate(runs) for span in run.spans]
     left = {i: len(run.spans) for i, run in enumerate(runs)}
@@ -136,7 +138,7 @@ def run_sharded(runs: list[ShardedRun], workers: int, address: str | None = None
                 left[i] -= 1
                 if left[i] == 0:
                     wall = time.perf_counter() - clock
-                    merging[merge.remote(runs[i], records[i], workers, wall)] = i
+                    merging[merge.remote(runs[i], records[i], workers, wall, commit)] = i
             episodes, steps = ray.get(progress.totals.remote())
             episodes = max(episodes, finished)  # a block's last report may still be on its way
             if (episodes, agents_done) != shown:  # redraw on news only (a log file stays short)
