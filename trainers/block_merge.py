@@ -59,7 +59,7 @@ def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float,
         _option_trajectory(run, returns)
     _write_tensorboard(cfg, out, returns, lengths, n_options)
     save_learning_curve(returns, out / "learning_curve.png",
-                        title=f"{cfg.agent} on {cfg.map} ({cfg.runs} runs)")
+                        title=f"{cfg.agent} on {cfg.env_name} ({cfg.runs} runs)")
     steps = sum(r["agent_steps"] for r in records.values())
     previous = previous_driver_wall(out)
     info = {
@@ -111,6 +111,14 @@ def _option_trajectory(run: ShardedRun, returns: np.ndarray) -> None:
 
     held = OptionBank.load(run.out / "options.pt").live().sum(-1).numpy()
     last = np.nan_to_num(returns[:, -1], nan=-np.inf)
+    if run.config.env is not None:  # off Pinball, as the one-process run: the two that hold most
+        from .env_trajectory import save_env_trajectory
+
+        order = sorted(range(len(held)), key=lambda p: -held[p])[:2]
+        candidates = [block_env_trajectory(run, p) for p in order]
+        save_env_trajectory(max(candidates, key=solution_rank),
+                            run.out / "option_trajectory.png")  # fmt: skip
+        return
     order = sorted(range(len(held)), key=lambda p: (-held[p], -last[p]))[:8]
     calls = []
     for p in order:  # the one-process order, so ties go to the same agent
@@ -143,6 +151,23 @@ def block_trajectory(config: TrainConfig, block_dir: str | Path, agent: int,
     resume_checkpoint(block_dir, trainer)
     run = best_greedy_trajectory(trainer.agent, config.map, agents=[agent])
     return {**run, "agent": offset + agent}
+
+
+def block_env_trajectory(run: ShardedRun, p: int) -> dict:
+    """Agent ``p``'s greedy episode in a fresh copy of the run's env (Figure 4b off Pinball),
+    from the agent state of its block's last checkpoint: a Gymnasium env's simulator state is
+    not saved, so the block cannot be resumed, but its agents can be read."""
+    from .checkpoint import latest_checkpoint, read_checkpoint
+    from .env_trajectory import best_env_trajectory
+    from .population import PopulationTrainer
+
+    a, b = next(span for span in run.spans if span[0] <= p < span[1])
+    block_dir = run.block_dir((a, b))
+    trainer = PopulationTrainer(block_config(run.config, a, b, block_dir))
+    trainer.agent.load_state_dict(read_checkpoint(latest_checkpoint(block_dir))["agent"])
+    found = best_env_trajectory(trainer.agent, run.config.env, agents=[p - a], tries=1,
+                                obs_bounds=run.config.obs_bounds)  # fmt: skip
+    return {**found, "agent": p}
 
 
 def _write_tensorboard(cfg: TrainConfig, out: Path, returns, lengths, n_options) -> None:
