@@ -40,6 +40,8 @@ class Parser(argparse.ArgumentParser):
     has ~60 flags, and its usage (35 lines) buried the line that matters (``--help`` shows it)."""
 
     def error(self, message: str):
+        if " " not in self.prog:  # bare ``skillchain``: its short usage lists the commands
+            super().error(message)
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 

@@ -104,7 +104,8 @@ def _merge_options(run: ShardedRun, dirs: list[Path]) -> np.ndarray:
 def _option_trajectory(run: ShardedRun, returns: np.ndarray) -> None:
     """``option_trajectory.png`` as a one-process run draws it: the best greedy solution among
     the eight agents holding the most options (ties: the best last return), each agent's
-    candidates replayed on a worker from its block's last checkpoint."""
+    candidates replayed on a worker from its block's last checkpoint; off Pinball, the two
+    that hold the most, read from their checkpoints (:func:`block_env_trajectory`)."""
     from skillchain_torch.options import OptionBank
 
     from .option_trajectory import save_option_trajectory, solution_rank

@@ -36,7 +36,7 @@ __all__ = ["main", "build_parser"]
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    command = parser.commands[args.command]  # errors print this command's usage
+    command = parser.commands[args.command]  # its errors are one line (arguments.Parser)
     if args.command == "summarize":
         from .study.summary import summarize_dir
 

@@ -267,6 +267,10 @@ class TrainConfig:
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
         """Build from a dict (e.g. ``config.json``); unknown keys raise ``ValueError``."""
         names = {f.name for f in dataclasses.fields(cls)}
+        if str(data.get("agent", "")).startswith("user:"):  # .user_agent.recorded_config
+            raise ValueError(f"the run's agent ({data['agent'][5:]}) was built in Python, not "
+                             "by name: rebuild it and resume with resume_checkpoint(DIR, "
+                             "PopulationTrainer(config, out_dir=DIR, agent=agent))")
         unknown = sorted(set(data) - names)
         if unknown:
             raise ValueError(f"unknown config fields: {', '.join(unknown)}")

@@ -26,6 +26,8 @@ import math
 import numpy as np
 import torch
 
+from .user_agent import recorded_config
+
 __all__ = ["Diverged", "DivergenceCheck"]
 
 
@@ -161,7 +163,9 @@ class DivergenceCheck:
             np.save(out / "partial_returns.npy", self.returns)
             np.save(out / "partial_lengths.npy", self.lengths)
             info = {"error": str(error), "agents": error.agents, "learners": error.learners,
-                    "episodes_done": self.episodes_done.tolist(), "config": self.config.to_dict()}
+                    "episodes_done": self.episodes_done.tolist(),
+                    "config": recorded_config(self.config, self.agent if getattr(
+                        self, "user_agent", False) else None)}  # fmt: skip
             (out / "diverged.json").write_text(json.dumps(info, indent=1) + "\n")
         return error
 

@@ -52,7 +52,7 @@ from .agents import make_agent
 from .config import TrainConfig
 from .divergence import Diverged, DivergenceCheck
 from .env_stepper import EnvStepper
-from .user_agent import check_agent, recorded_config
+from .user_agent import agent_label, check_agent, recorded_config
 
 __all__ = ["PopulationTrainer", "EpisodeBatch", "STAGES", "Diverged", "DIVERGED_OUTPUTS"]
 
@@ -396,5 +396,5 @@ class PopulationTrainer(DivergenceCheck):
 
     def __repr__(self) -> str:
         c = self.config
-        return (f"PopulationTrainer(agent={c.agent!r}, env={c.env_name!r}, runs={c.runs}, "
-                f"episodes={c.episodes}, seed={c.seed}, active={self.num_active})")
+        return (f"PopulationTrainer(agent={agent_label(self)!r}, env={c.env_name!r}, "
+                f"runs={c.runs}, episodes={c.episodes}, seed={c.seed}, active={self.num_active})")

@@ -42,10 +42,14 @@ OUTPUTS = (
 )
 
 
-def _interrupted(out: Path, every: int) -> str:
+def _interrupted(out: Path, every: int, user_agent: bool = False) -> str:
     """What to do after Ctrl-C: resume from a checkpoint, or start again if none was written."""
     from .checkpoint import latest_checkpoint
 
+    if user_agent:  # built in Python: the command line cannot rebuild it
+        return (f"\ninterrupted; continue in Python: resume_checkpoint({str(out)!r}, "
+                f"PopulationTrainer(config, out_dir={str(out)!r}, agent=agent)), then "
+                f"train_and_write again")
     if latest_checkpoint(out) is not None:
         return f"\ninterrupted; continue with: skillchain train --resume {out}"
     when = f"every {every} episodes" if every else "disabled by --checkpoint-every 0"
@@ -86,7 +90,8 @@ def train_and_write(trainer, out: str | Path, quiet: bool = False) -> int:
     except KeyboardInterrupt:
         bar.close()
         tb.close()
-        print(_interrupted(out, trainer.config.checkpoint_every), file=sys.stderr)
+        print(_interrupted(trainer.out_dir or out, trainer.config.checkpoint_every,
+                           getattr(trainer, "user_agent", False)), file=sys.stderr)
         return 130
     except Exception:  # a diverged learner, a full disk: _run reports it
         bar.close()

@@ -27,6 +27,8 @@ def main(run: Path) -> dict:
                         generator=torch.Generator().manual_seed(0))  # fmt: skip
     with torch.no_grad():
         inside = (bank.classifier.logit(points) > 0).double().mean(1)  # [P, K]
+    # an untrained slot contains everything (InitiationClassifier.contains), whatever its logit
+    inside = torch.where(bank.classifier.trained, inside, torch.ones_like(inside))
     clf = bank.classifier
     positives = clf.labels.sum(-1)
     summary = {

@@ -46,7 +46,14 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.backends import discovery as backend
-from skillchain_torch.options import GoalEvent, OptionBank, OptionStatus, TerminationPredicate
+from skillchain_torch.options import (
+    GoalEvent,
+    InitiationClassifier,
+    OptionBank,
+    OptionStatus,
+    TerminationPredicate,
+)
+from skillchain_torch.options.initiation_fit import check_fittable
 
 from .convergence import CONVERGENCE_EPISODES, CONVERGENCE_THRESHOLD, ConvergenceTest
 from .episode_rules import EpisodeRules
@@ -160,6 +167,8 @@ class SkillChaining(StepRules, EpisodeRules):
         if gestation < 0 or max_branching < 0 or max_option_steps < 1:
             raise ValueError("need gestation >= 0, max_branching >= 0, max_option_steps >= 1")
         self.bank = bank
+        if isinstance(bank.classifier, InitiationClassifier):  # discovery fits every set it
+            check_fittable(bank.classifier)  # learns: refuse one that cannot, before the run
         self.events = tuple(events)
         self.gestation, self.max_branching = int(gestation), int(max_branching)
         self.max_option_steps, self.overlap = int(max_option_steps), bool(overlap)

@@ -32,7 +32,6 @@ import torch
 from torch import Tensor, nn
 
 from skillchain_torch.options.initiation import InitiationClassifier
-from skillchain_torch.options.initiation_fit import check_fittable
 from skillchain_torch.options.io import (
     CLASSIFIERS,
     Q_HEADS,
@@ -77,8 +76,6 @@ class OptionBank(nn.Module):
             if (part.population, part.slots) != (population, slots):
                 raise ValueError(f"{name} is for P={part.population}, K={part.slots}; the bank "
                                  f"has P={population}, K={slots}")  # fmt: skip
-        if isinstance(classifier, InitiationClassifier):  # a subclass that cannot learn
-            check_fittable(classifier)
         self.population, self.slots = population, slots
         self.q_head = q_head
         self.classifier = classifier

@@ -72,17 +72,17 @@ def check_fittable(clf) -> None:
     """``ValueError`` (one line) for a subclass whose own model ``fit`` cannot train: it
     overrides ``logit`` or ``phi``, keeps the built-in ``fit``, and has no parameter with
     ``requires_grad`` (the built-in ``weight``/``bias`` have none: their closed-form fit serves
-    the built-in model only). :class:`~skillchain_torch.options.OptionBank` checks as it is
-    built, so a run does not fail at its first fit."""
+    the built-in model only). Skill-chaining discovery checks as it is built, so a run does not
+    fail at its first fit; a bank whose sets are only used (given options) is not checked."""
     from .initiation import InitiationClassifier
 
     if clf.builtin_model() or type(clf).fit is not InitiationClassifier.fit:
         return
     if not any(p.requires_grad for p in clf.parameters()):
         raise ValueError(
-            f"{type(clf).__name__} overrides logit but has no parameter with requires_grad="
-            "True, so fit has nothing to train: give it parameters of its own (an nn.Module "
-            "or nn.Parameter) or override fit")
+            f"{type(clf).__name__} overrides logit or phi but has no parameter with "
+            "requires_grad=True, so fit has nothing to train: give it parameters of its own "
+            "(an nn.Module or nn.Parameter) or override fit")
 
 
 def gradient_fit(clf, mask: Tensor, length: int) -> None:
@@ -91,6 +91,9 @@ def gradient_fit(clf, mask: Tensor, length: int) -> None:
     model has nothing to train."""
     check_fittable(clf)
     params = [p for p in clf.parameters() if p.requires_grad]
+    if not params:  # a subclass with its own fit that calls this one
+        raise ValueError(f"{type(clf).__name__}: gradient_fit found no parameter with "
+                         "requires_grad=True: nothing to fit")  # fmt: skip
     # A model with own_logits(examples, agents) computes only the agents that fit (episodes
     # end a few agents at a time); the others' parameters get no gradient, so no step.
     rows = mask.any(-1).nonzero()[:, 0] if hasattr(clf, "own_logits") else None

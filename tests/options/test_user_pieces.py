@@ -262,24 +262,28 @@ def test_docstring_examples(module):
     assert doctest.testmod(module, raise_on_error=True).attempted > 0
 
 
-def test_a_subclass_that_cannot_learn_is_refused_when_the_bank_is_built():
+def test_a_set_that_discovery_cannot_fit_is_refused_before_the_run():
     """Overriding ``logit`` on the built-in weights (which have no gradient) used to build, run
-    and then fail at the first fit, mid-run; now the bank refuses it in one line, and the same
-    class with a trainable parameter is accepted."""
+    and then fail at the first fit, mid-run; now skill-chaining discovery refuses it in one line
+    as it is built. The same class with a trainable parameter is accepted, and a fixed set that
+    is only used (a bank of given options: never fitted) is not refused."""
+    from skillchain_torch.agents import HierarchicalAgent, SkillChainingAgent
 
     class Wrapped(InitiationClassifier):
         def logit(self, obs):
             return super().logit(obs)
 
-    with pytest.raises(ValueError, match="Wrapped overrides logit but has no parameter"):
-        OptionBank(2, 2, FourierOptionQHead(2, 2, order=1),
-                   Wrapped(population=2, slots=2, capacity=8))  # fmt: skip
+    def bank(cls):
+        return OptionBank(2, 2, FourierOptionQHead(2, 2, order=1),
+                          cls(population=2, slots=2, capacity=8))  # fmt: skip
+
+    with pytest.raises(ValueError, match="Wrapped overrides logit or phi but has no parameter"):
+        SkillChainingAgent(bank(Wrapped), order=1)
+    HierarchicalAgent(bank(Wrapped), order=1)  # sets used as given: nothing to fit
 
     class Trainable(Wrapped):
         def __init__(self, **kwargs):
             super().__init__(**kwargs)
             self.weight.requires_grad_()
 
-    bank = OptionBank(2, 2, FourierOptionQHead(2, 2, order=1),
-                      Trainable(population=2, slots=2, capacity=8))  # fmt: skip
-    assert isinstance(bank.classifier, Trainable)
+    assert isinstance(SkillChainingAgent(bank(Trainable), order=1).bank.classifier, Trainable)

@@ -63,3 +63,7 @@ def test_readme_snippet_runs_and_writes_what_the_cli_writes(tmp_path):
     runs = [p.name for p in (out / "tb").iterdir()]
     assert runs == ["SkillChainingAgent_gymnasium-MountainCar-v0_P4_seed0"], runs
     assert not [p for p in (out / "tb" / runs[0]).iterdir() if p.is_dir()]  # no hparams run
+    events = b"".join(p.read_bytes() for p in (out / "tb" / runs[0]).iterdir())
+    assert b"_hparams_/session_start_info" in events and b"gestation" in events  # hparams here
+    with pytest.raises(ValueError, match="built in Python, not by name"):
+        TrainConfig.load_json(out / "config.json")
