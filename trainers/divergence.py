@@ -88,7 +88,7 @@ class DivergenceCheck:
                      top if isinstance(top, list) else [top])]
         bank = getattr(agent, "bank", None)
         if bank is None:
-            return learners
+            return self._for_user(learners)
         heads = [pick(t) for t in bank.q_head.slot_tensors().values()]  # [P, K, ...]
         alpha = bank.q_head.config.get("alpha")
         if cfg.agent == "given-options":
@@ -105,7 +105,14 @@ class DivergenceCheck:
              f"their step size (lr {classifier.lr:g}) is not a run parameter",
              [pick(t) for t in _per_agent(classifier, agent.population, ("weight", "bias"))]),
         ]
-        return learners
+        return self._for_user(learners)
+
+    def _for_user(self, learners: list) -> list:
+        """The advice for an agent built in Python, whose step sizes no flag set."""
+        if not getattr(self, "user_agent", False):
+            return learners
+        return [(name, "lower its step size where you built the agent", tensors)
+                for name, _, tensors in learners]  # fmt: skip
 
     def check_learners(self, rows: torch.Tensor | None = None) -> None:
         """Raise :class:`Diverged` if a learner of the agents at active rows ``rows`` (default:

@@ -67,3 +67,23 @@ def test_readme_snippet_runs_and_writes_what_the_cli_writes(tmp_path):
     assert b"_hparams_/session_start_info" in events and b"gestation" in events  # hparams here
     with pytest.raises(ValueError, match="built in Python, not by name"):
         TrainConfig.load_json(out / "config.json")
+
+
+def test_a_diverged_user_agent_gets_advice_for_python_and_its_own_record(tmp_path):
+    """The divergence advice names no flag (no flag set the user's step sizes), and
+    diverged.json records the user's agent, not the config's."""
+    from skillchain_torch.trainers.divergence import Diverged
+
+    agent = SkillChainingAgent(OptionBank.build(2, 2, order=1), order=1)
+    trainer = PopulationTrainer(TrainConfig(runs=2, episodes=3, max_episode_steps=30,
+                                            checkpoint_every=0), out_dir=tmp_path, agent=agent)
+
+    def poison(trainer, batch):
+        trainer.agent.q_head.weight.view(-1)[0] = float("nan")
+
+    trainer.register_op("post_episodes", poison)
+    with pytest.raises(Diverged, match="lower its step size where you built the agent"):
+        trainer.train()
+    saved = json.loads((tmp_path / "diverged.json").read_text())
+    assert saved["config"]["agent"] == "user:SkillChainingAgent"
+    assert "--alpha" not in saved["error"]
