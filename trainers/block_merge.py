@@ -108,19 +108,17 @@ def _option_trajectory(run: ShardedRun, returns: np.ndarray) -> None:
     that hold the most, read from their checkpoints (:func:`block_env_trajectory`)."""
     from skillchain_torch.options import OptionBank
 
-    from .option_trajectory import save_option_trajectory, solution_rank
+    from .option_trajectory import figure_candidates, save_option_trajectory, solution_rank
 
     held = OptionBank.load(run.out / "options.pt").live().sum(-1).numpy()
-    last = np.nan_to_num(returns[:, -1], nan=-np.inf)
-    if run.config.env is not None:  # off Pinball, as the one-process run: the two that hold most
+    if run.config.env is not None:  # off Pinball, as the one-process run
         from .env_trajectory import save_env_trajectory
 
-        order = sorted(range(len(held)), key=lambda p: -held[p])[:2]
-        candidates = [block_env_trajectory(run, p) for p in order]
+        candidates = [block_env_trajectory(run, p) for p in figure_candidates(held)]
         save_env_trajectory(max(candidates, key=solution_rank),
                             run.out / "option_trajectory.png")  # fmt: skip
         return
-    order = sorted(range(len(held)), key=lambda p: (-held[p], -last[p]))[:8]
+    order = figure_candidates(held, returns[:, -1])
     calls = []
     for p in order:  # the one-process order, so ties go to the same agent
         a, b = next(span for span in run.spans if span[0] <= p < span[1])

@@ -26,7 +26,7 @@ import math
 import numpy as np
 import torch
 
-from .user_agent import recorded_config
+from .user_agent import run_record
 
 __all__ = ["Diverged", "DivergenceCheck"]
 
@@ -171,8 +171,7 @@ class DivergenceCheck:
             np.save(out / "partial_lengths.npy", self.lengths)
             info = {"error": str(error), "agents": error.agents, "learners": error.learners,
                     "episodes_done": self.episodes_done.tolist(),
-                    "config": recorded_config(self.config, self.agent if getattr(
-                        self, "user_agent", False) else None)}  # fmt: skip
+                    "config": run_record(self)}
             (out / "diverged.json").write_text(json.dumps(info, indent=1) + "\n")
         return error
 

@@ -31,7 +31,7 @@ from torchrl.record.loggers import TensorboardLogger
 
 from .plots import t95
 from .timed import TimedHook
-from .user_agent import agent_label, recorded_config
+from .user_agent import agent_label, run_record
 
 __all__ = ["TensorBoardHook", "population_interval", "experiment_name", "log_population_arrays"]
 
@@ -57,10 +57,9 @@ def experiment_name(config, agent: str | None = None) -> str:
     return f"{agent or config.agent}_{name}_P{config.runs}_seed{config.seed}"
 
 
-def log_config(logger, config, agent=None) -> None:
-    """The hyperparameters and a text table of ``config`` (once, at a run's start); for an
-    agent of the user's own, the fields :func:`.user_agent.recorded_config` keeps."""
-    config = recorded_config(config, agent)
+def log_config(logger, config: dict) -> None:
+    """The hyperparameters and a text table of ``config`` (a run's recorded fields,
+    :func:`.user_agent.run_record`), once, at a run's start."""
     values = {k: v if isinstance(v, (bool, int, float, str)) else str(v)
               for k, v in config.items()}  # None and lists as text, as TensorBoard shows them
     # TorchRL's log_hparams calls SummaryWriter.add_hparams, which writes into a new
@@ -87,7 +86,7 @@ def log_population_arrays(logger, config, returns, lengths, n_options=None,
         >>> log_population_arrays(logger, TrainConfig(), np.ones((2, 3)), np.ones((2, 3), int))
     """
     log = logger.log_scalar
-    log_config(logger, config)
+    log_config(logger, config.to_dict())
     P, E = returns.shape
     if per_agent:
         for p in range(P):
@@ -148,8 +147,7 @@ class TensorBoardHook(TimedHook):
         self._last = (trainer.wall_time, trainer.agent_steps)
         if trainer.global_step > 0:
             return  # resumed: the hyperparameters are already logged
-        log_config(self.logger, trainer.config,
-                   trainer.agent if getattr(trainer, "user_agent", False) else None)
+        log_config(self.logger, run_record(trainer))
 
     def _post_episodes(self, trainer, batch) -> None:
         log = self.logger.log_scalar

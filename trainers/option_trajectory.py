@@ -30,6 +30,7 @@ from skillchain_torch.envs.pinball.physics import GOAL_REWARD
 from skillchain_torch.modules import LinearQHead
 
 __all__ = ["greedy_trajectory", "greedy_trajectories", "best_greedy_trajectory", "solution_rank",
+           "figure_candidates",
            "plot_option_trajectory", "save_option_trajectory", "OPTION_COLORS"]  # fmt: skip
 
 # Distinct colours for option slots; primitives are black.
@@ -204,6 +205,25 @@ def best_greedy_trajectory(agent, map_name: str, agents=None, max_steps: int = 2
     # An episode stopped early (None) ranks strictly below a finished one; the order of the
     # rest is kept, so max picks the one the episodes run in full would pick.
     return max((run for run in out if run is not None), key=solution_rank)
+
+
+def figure_candidates(held, last_returns=None) -> list[int]:
+    """The agents whose episodes Figure 4b (``option_trajectory.png``) draws from, in order: on
+    Pinball (``last_returns`` given) the eight that hold the most options, ties to the best last
+    return; off Pinball (``None``) the two that hold the most (the replay runs the torch path,
+    which is slow). ``held [P]``: live options per agent.
+
+    Example:
+        >>> figure_candidates([1, 3, 3, 0], last_returns=[5.0, 1.0, 2.0, 9.0])
+        [2, 1, 0, 3]
+        >>> figure_candidates([1, 3, 3, 0])
+        [1, 2]
+    """
+    agents = range(len(held))
+    if last_returns is None:
+        return sorted(agents, key=lambda p: -held[p])[:2]
+    last = np.nan_to_num(np.asarray(last_returns, dtype=np.float64), nan=-np.inf)
+    return sorted(agents, key=lambda p: (-held[p], -last[p]))[:8]
 
 
 def solution_rank(run: dict) -> tuple:

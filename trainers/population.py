@@ -52,7 +52,7 @@ from .agents import make_agent
 from .config import TrainConfig
 from .divergence import Diverged, DivergenceCheck
 from .env_stepper import EnvStepper
-from .user_agent import agent_label, check_agent, recorded_config
+from .user_agent import agent_label, check_agent, run_record
 
 __all__ = ["PopulationTrainer", "EpisodeBatch", "STAGES", "Diverged", "DIVERGED_OUTPUTS"]
 
@@ -340,8 +340,7 @@ class PopulationTrainer(DivergenceCheck):
         out.mkdir(parents=True, exist_ok=True)
         np.save(out / "returns.npy", self.returns)
         np.save(out / "lengths.npy", self.lengths)
-        config = recorded_config(self.config, self.agent if self.user_agent else None)
-        (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+        (out / "config.json").write_text(json.dumps(run_record(self), indent=2) + "\n")
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:

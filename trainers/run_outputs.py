@@ -186,6 +186,7 @@ def write_discovery(trainer, discovery, out: Path) -> None:
     import numpy as np
 
     from .discovery_log import option_tree
+    from .option_trajectory import figure_candidates
 
     trainer.agent.bank.save(out / "options.pt")
     np.save(out / "n_options.npy", discovery.n_options)
@@ -194,21 +195,18 @@ def write_discovery(trainer, discovery, out: Path) -> None:
     if trainer.config.env is not None:  # Figure 4b off Pinball: observation dims 0 and 1
         from .env_trajectory import best_env_trajectory, save_env_trajectory
 
-        held = trainer.agent.bank.live().sum(-1).cpu().numpy()
-        order = sorted(range(len(held)), key=lambda p: -held[p])[:2]  # (torch path: slow)
+        order = figure_candidates(trainer.agent.bank.live().sum(-1).cpu().numpy())
         run = best_env_trajectory(trainer.agent, trainer.config.env, agents=order, tries=1,
                                   obs_bounds=trainer.config.obs_bounds)  # fmt: skip
         save_env_trajectory(run, out / "option_trajectory.png")
         return
-    # Figure 4b: the best greedy solution through options, among the eight agents that hold
-    # the most options (ties: the best last return).
+    # Figure 4b: the best greedy solution through options, among figure_candidates' eight.
     import torch
 
     from .option_trajectory import best_greedy_trajectory, save_option_trajectory
 
-    held = trainer.agent.bank.live().sum(-1).cpu().numpy()
-    last = np.nan_to_num(trainer.returns[:, -1], nan=-np.inf)
-    order = sorted(range(len(held)), key=lambda p: (-held[p], -last[p]))[:8]
+    order = figure_candidates(trainer.agent.bank.live().sum(-1).cpu().numpy(),
+                              trainer.returns[:, -1])  # fmt: skip
     # The replays are many tiny torch calls: at torch's default threads they ran ~12x slower on
     # a busy machine than at the trainer's one thread (a sharded run's workers draw at 1).
     threads = torch.get_num_threads()

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["TRAINER_FIELDS", "agent_label", "check_agent", "recorded_config"]
+__all__ = ["TRAINER_FIELDS", "agent_label", "check_agent", "recorded_config", "run_record"]
 
 # The fields the trainer itself reads (the env, the run's length and seeds, where it computes,
 # and the exploration schedule it imposes on any agent); every other field builds the agent.
@@ -85,3 +85,11 @@ def agent_label(trainer) -> str:
     class of the user's own agent."""
     return (type(trainer.agent).__name__ if getattr(trainer, "user_agent", False)
             else trainer.config.agent)  # fmt: skip
+
+
+def run_record(trainer) -> dict[str, Any]:
+    """What ``config.json``, ``diverged.json`` and TensorBoard's hparams record for
+    ``trainer``'s run: :func:`recorded_config` of its config and, if the user built it, its
+    agent."""
+    user = getattr(trainer, "user_agent", False)
+    return recorded_config(trainer.config, trainer.agent if user else None)

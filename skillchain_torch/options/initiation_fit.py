@@ -89,11 +89,10 @@ def gradient_fit(clf, mask: Tensor, length: int) -> None:
     """``clf.sweeps`` optimizer steps on the summed per-slot mean log-loss of the slots in
     ``mask [P, K]`` over their first ``length`` stored places. Raises ``ValueError`` if the
     model has nothing to train."""
-    check_fittable(clf)
     params = [p for p in clf.parameters() if p.requires_grad]
-    if not params:  # a subclass with its own fit that calls this one
-        raise ValueError(f"{type(clf).__name__}: gradient_fit found no parameter with "
-                         "requires_grad=True: nothing to fit")  # fmt: skip
+    if not params:  # discovery refused such a set up front (check_fittable); a direct call
+        raise ValueError(f"{type(clf).__name__} has no parameter with requires_grad=True: "
+                         "nothing to fit")  # fmt: skip
     # A model with own_logits(examples, agents) computes only the agents that fit (episodes
     # end a few agents at a time); the others' parameters get no gradient, so no step.
     rows = mask.any(-1).nonzero()[:, 0] if hasattr(clf, "own_logits") else None
