@@ -131,6 +131,7 @@ class Preset:
     intra_option_primitives: bool
     intra_option_target: str
     option_interruption: bool
+    end_outside_set: str
     # options: Q-learning over a Fourier basis
     option_order: int
     option_alpha: float
@@ -190,6 +191,7 @@ PAPER = Preset(
     intra_option_primitives=False,  # 5.1: the top level learns by SMDP Sarsa alone
     intra_option_target="decisions",  # (used only with intra_option_primitives)
     option_interruption=False,  # 3: an option runs until its termination condition holds
+    end_outside_set="off",  # 3: ... (or it times out), wherever it goes
     option_order=3,  # 5.1: options' 3rd-order Fourier basis
     option_alpha=0.0005,  # 5.1: Q-learning, alpha_o = 0.0005
     option_epsilon=0.01,  # 5.1: options' epsilon = 0.01

@@ -30,8 +30,9 @@ CONFIG_OPTIONS = (
     "options_agent", "slots", "initiation_bias", "initiation_centered", "gestation_positives",
     "initiation_start", "initiation_constrain", "one_class_fits", "failure_bootstrap",
     "keep_negatives", "store_failures", "constrain_nearest", "intra_option_primitives",
-    "intra_option_target", "option_interruption", "policy_start", "value_start", "value_bonus",
-    "option_alpha", "completion_reward", "gestation", "convergence_threshold", "max_branching",
+    "intra_option_target", "option_interruption", "end_outside_set", "policy_start",
+    "value_start", "value_bonus", "option_alpha", "completion_reward", "gestation",
+    "convergence_threshold", "max_branching",
     *NEURAL_OPTIONS,
 )  # fmt: skip
 

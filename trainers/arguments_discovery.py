@@ -95,6 +95,14 @@ def add_discovery_arguments(parser: argparse.ArgumentParser) -> None:
             "an executing option stops where it is no longer the top level's greedy decision "
             "(default off: options run to their end, as the paper's)")
     parser.add_argument(
+        "--end-outside-set",
+        choices=("off", "learned", "always"),
+        default=None,
+        help="an executing option also ends where it leaves its own initiation set, as neither "
+        "a success nor a failure: never (the paper's options run to their end), for options "
+        "whose sets are learned, or always" + _presets("end_outside_set"),
+    )
+    parser.add_argument(
         "--failure-bootstrap",
         choices=("decision", "primitives"),
         default=None,

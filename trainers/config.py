@@ -102,8 +102,8 @@ class TrainConfig:
             ``pos20-fitted-cstart``, ``results/screening/README.md``).
         failure_bootstrap, intra_option_primitives, intra_option_target: (preset) see
             :class:`~skillchain_torch.agents.HierarchicalAgent`'s arguments of those names.
-        option_interruption: (preset) ``interruption`` of
-            :class:`~skillchain_torch.agents.HierarchicalAgent`.
+        option_interruption, end_outside_set: (preset) ``interruption`` and
+            ``end_outside_set`` of :class:`~skillchain_torch.agents.HierarchicalAgent`.
         keep_negatives, store_failures, constrain_nearest: (preset) see
             :class:`~skillchain_torch.options.InitiationClassifier`'s arguments of those names.
         policy_start: (preset) how a joining option's policy starts (``"zero"``: gestation's
@@ -178,6 +178,7 @@ class TrainConfig:
     intra_option_primitives: bool | None = None
     intra_option_target: str | None = None
     option_interruption: bool | None = None
+    end_outside_set: str | None = None
     policy_start: str | None = None
     option_alpha: float | None = None
     completion_reward: float | None = None

@@ -16,7 +16,7 @@ LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_neg
                  "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15,
                  "intra_option_primitives": False, "intra_option_target": "decisions",
                  "store_failures": False, "constrain_nearest": False,
-                 "option_interruption": False,
+                 "option_interruption": False, "end_outside_set": "off",
                  "top_head": "fourier", "option_head": "fourier", "initiation": "logistic",
                  "max_branching": 3, "top_lr": 1e-3, "top_target_update": 250,
                  "top_bootstrap": "sarsa", "epsilon_init": None, "annealing_steps": 0}
@@ -42,7 +42,7 @@ UNREAD_FIELDS = {
     "flat": _DISCOVERY_FIELDS + _PIECES + ("options", "options_agent", "failure_bootstrap",
                                            "completion_reward", "intra_option_primitives",
                                            "intra_option_target",
-                                           "option_interruption"),
+                                           "option_interruption", "end_outside_set"),
     "given-options": _DISCOVERY_FIELDS + _PIECES,
     "skill-chaining": ("options", "options_agent"),
 }

@@ -117,6 +117,7 @@ class GivenOptionsAgent(HierarchicalAgent):
                          intra_option_primitives=cfg.intra_option_primitives,
                          intra_option_target=cfg.intra_option_target,
                          interruption=cfg.option_interruption,
+                         end_outside_set=cfg.end_outside_set,
                          overlap=True,  # as the options were learned (no-op if unrelated)
                          completion_reward=cfg.completion_reward, native=native)
         self.config = cfg

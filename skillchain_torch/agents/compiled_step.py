@@ -39,7 +39,7 @@ class CompiledStep:
             failure_bootstrap_primitives=self.failure_bootstrap == "primitives",
             intra_option_primitives=self.intra_option_primitives,
             intra_option_primitive_target=self.intra_option_target == "primitives",
-            interruption=self.interruption)  # fmt: skip
+            interruption=self.interruption, leave_from=self.leave_from)  # fmt: skip
 
     def _encode_next(self, next_obs: Tensor) -> tuple[Tensor, Tensor | None, Tensor | None]:
         """``(phi(s'), the option heads' code of s' or None, the columns of phi it is picked

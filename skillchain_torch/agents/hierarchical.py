@@ -48,7 +48,11 @@ from torch import Tensor, nn
 
 from skillchain_torch.agents.compiled_step import CompiledStep
 from skillchain_torch.agents.episode_protocol import EpisodeProtocol
-from skillchain_torch.agents.option_execution import OptionExecution
+from skillchain_torch.agents.option_execution import (
+    FAILURE_BOOTSTRAPS,
+    INTRA_OPTION_TARGETS,
+    OptionExecution,
+)
 from skillchain_torch.agents.step_state import STEP_FIELDS, StepState, StepStateFields
 from skillchain_torch.agents.top_level import TopLevel, shared_fourier_columns
 from skillchain_torch.backends import hierarchical as backend
@@ -76,8 +80,6 @@ __all__ = ["HierarchicalAgent", "shared_fourier_columns", "NUM_PRIMITIVES", "MAX
 NUM_PRIMITIVES = 5
 OBS_DIM = 4
 MAX_OPTION_STEPS = 250
-FAILURE_BOOTSTRAPS = ("decision", "primitives")
-INTRA_OPTION_TARGETS = ("decisions", "primitives")
 UNIFORMS_PER_STEP = 4  # top-level (explore, pick), option (explore, pick)
 AGENT_STREAM = 0
 
@@ -122,6 +124,10 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         interruption: an executing option stops at ``s'`` where ``Q(s', o) < max_d Q(s', d)``
             (Sutton, Precup & Singh 1999, section 5); neither a success nor a failure. Off
             (the paper: options run until their target fires or they time out).
+        end_outside_set: an executing option also ends at an ``s'`` outside its own
+            initiation set, where its policy need not be defined; neither a success nor a
+            failure. ``"off"`` (the paper), ``"learned"`` (options whose sets are learned)
+            or ``"always"``.
         q_head: the top-level value head (a :class:`~skillchain_torch.interfaces.ValueHead`
             over ``5 + K`` decisions, on ``features``); default the paper's
             :class:`~skillchain_torch.modules.LinearQHead`, stepped in closed form by
@@ -160,6 +166,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         intra_option_primitives: bool = False,
         intra_option_target: str = "decisions",
         interruption: bool = False,
+        end_outside_set: str = "off",
         q_head: nn.Module | None = None,
         features: nn.Module | None = None,
         optimizer: torch.optim.Optimizer | None = None,
@@ -168,16 +175,8 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         native: bool | None = None,
     ):
         super().__init__()
-        if failure_bootstrap not in FAILURE_BOOTSTRAPS:
-            raise ValueError(f"failure_bootstrap must be one of {', '.join(FAILURE_BOOTSTRAPS)}"
-                             f", got {failure_bootstrap!r}")  # fmt: skip
-        self.failure_bootstrap = failure_bootstrap
-        if intra_option_target not in INTRA_OPTION_TARGETS:
-            raise ValueError(f"intra_option_target must be one of "
-                             f"{', '.join(INTRA_OPTION_TARGETS)}, got {intra_option_target!r}")
-        self.intra_option_primitives = bool(intra_option_primitives)
-        self.intra_option_target = intra_option_target
-        self.interruption = bool(interruption)
+        self._set_readings(failure_bootstrap, intra_option_primitives, intra_option_target,
+                           interruption, end_outside_set)  # fmt: skip
         device = torch.device(bank.status.device if device is None else device)
         self.bank = bank.to(device)
         self.population, self.slots = bank.population, bank.slots
@@ -333,7 +332,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         if self.native:  # the rest in one compiled pass, on the declared StepState
             info = self._compiled_transition(backend.AtNext(
                 next_obs, reward, terminated, truncated, stepped, contains_next, reached, u,
-                *self._encode_next(next_obs)))
+                *self._encode_next(next_obs), own=own_next))
             self.own_contains = own_next
             return info
         bank = self.bank
@@ -357,7 +356,7 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
         slot = self.option.clamp(min=0)
         hit = reached.gather(1, slot[:, None])[:, 0]  # the executing option's target at s'
         option_stops = executing & (hit | (self.duration >= self.max_option_steps))
-        decision_ended = stepped & (~executing | option_stops | ended)
+        decision_ended = stepped & (~executing | option_stops | ended | self._leaves(own_next))
         # Next top-level decision at s' (also the bootstrap decision d'). With intra-option
         # primitives or interruption, the rows inside an option value s' too.
         inside = stepped & executing
@@ -396,5 +395,6 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
                 f"option_epsilon={self.option_epsilon}, gamma={self.gamma}, max_option_steps="
                 f"{self.max_option_steps}, failure_bootstrap={self.failure_bootstrap}, "
                 f"intra_option_primitives={self.intra_option_primitives} "
-                f"({self.intra_option_target}), interruption={self.interruption}, "
+                f"({self.intra_option_target}), interruption={self.interruption}, end_outside_set="
+                f"{self.end_outside_set}, "
                 f"active={int(self._index.numel())}, native={self.native}")

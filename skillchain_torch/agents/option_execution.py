@@ -22,13 +22,40 @@ from torch import Tensor
 from skillchain_torch.backends import hierarchical as backend
 from skillchain_torch.discovery.events import evaluate_base_events, target_indicator
 from skillchain_torch.discovery.overlap import exclude_overlap
+from skillchain_torch.options import OptionStatus
 from skillchain_torch.policies import epsilon_greedy
 
-__all__ = ["OptionExecution"]
+__all__ = ["OptionExecution", "FAILURE_BOOTSTRAPS", "INTRA_OPTION_TARGETS", "END_OUTSIDE_SET"]
+
+
+FAILURE_BOOTSTRAPS = ("decision", "primitives")
+INTRA_OPTION_TARGETS = ("decisions", "primitives")
+# Which executions end where they leave their option's own set: none (the paper), those of
+# options whose sets are learned (OptionStatus.LEARNED), or every one.
+END_OUTSIDE_SET = {"off": None, "learned": OptionStatus.LEARNED, "always": OptionStatus.LEARNING}
 
 
 class OptionExecution:
     """Memberships, targets and the executing option's action."""
+
+    def _set_readings(self, failure_bootstrap: str, intra_option_primitives: bool,
+                      intra_option_target: str, interruption: bool,
+                      end_outside_set: str) -> None:  # fmt: skip
+        """Check and keep the readings of an execution (HierarchicalAgent's arguments)."""
+        if failure_bootstrap not in FAILURE_BOOTSTRAPS:
+            raise ValueError(f"failure_bootstrap must be one of {', '.join(FAILURE_BOOTSTRAPS)}"
+                             f", got {failure_bootstrap!r}")  # fmt: skip
+        if intra_option_target not in INTRA_OPTION_TARGETS:
+            raise ValueError(f"intra_option_target must be one of "
+                             f"{', '.join(INTRA_OPTION_TARGETS)}, got {intra_option_target!r}")
+        if end_outside_set not in END_OUTSIDE_SET:
+            raise ValueError(f"end_outside_set must be one of {', '.join(END_OUTSIDE_SET)}, "
+                             f"got {end_outside_set!r}")  # fmt: skip
+        self.failure_bootstrap = failure_bootstrap
+        self.intra_option_primitives = bool(intra_option_primitives)
+        self.intra_option_target = intra_option_target
+        self.interruption, self.end_outside_set = bool(interruption), end_outside_set
+        self.leave_from = END_OUTSIDE_SET[end_outside_set]
 
     def membership(self, obs: Tensor) -> Tensor:
         """``[P, K]``: which initiation sets hold ``obs [P, 4]`` for *choosing* an option (one
@@ -78,6 +105,16 @@ class OptionExecution:
         if gone.numel() > 0:  # s' left the option's set: value it there
             q_o = q_o.index_put((gone,), self.q_head.q_value(phi_next, self.decision, gone))
         return going_on & (q_o < self._best_decision())
+
+    def _leaves(self, own_next: Tensor) -> Tensor | bool:
+        """``[P]``: executions whose ``s'`` lies outside their option's own initiation set
+        (``own_next [P, K]``), which end there under ``end_outside_set`` (``"learned"``: only
+        options whose sets are learned; ``"off"``: none, ``False``)."""
+        if self.leave_from is None:
+            return False
+        slot = self.option.clamp(min=0)[:, None]
+        status = self.bank.status.gather(1, slot)[:, 0]
+        return (self.option >= 0) & (status >= self.leave_from) & ~own_next.gather(1, slot)[:, 0]
 
     def _learn_inside(self, reward: Tensor, terminated: Tensor, inside: Tensor,
                       stepped: Tensor, phi_next: Tensor) -> None:  # fmt: skip

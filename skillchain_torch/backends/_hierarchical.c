@@ -160,7 +160,7 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  *      out_obs, out_code, out_contains, out_phi, out_decision, out_option, out_action,
  *      out_ret, out_duration, q, d_next, decision_ended, option_delta, smdp_delta,
  *      info_duration, info_return, started, value, fail_boot, state_phi, interrupt, own,
- *      ipo_primitives)
+ *      ipo_primitives, own_next, leave_from)
  *
  * HierarchicalAgent.transition for every row, given what needs torch or Python at s'
  * (memberships, targets, features, uniforms [P, 4]): the intra-option updates, the decision's
@@ -185,19 +185,22 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
  * (HierarchicalAgent's interruption). own [P, K]: s in each option's own set (before the
  * no-overlap narrowing). The live options a transition from s updates are
  * objectives.q_learning.option_update_mask's: the executing one wherever s is, the others
- * where own holds. */
+ * where own holds. own_next [P, K] (or 0): each option's own set at s'; where given, an
+ * executing option whose status is at least leave_from ends at an s' outside its own set
+ * (HierarchicalAgent's end_outside_set). */
 NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, A, F, Fo, step_stride;
     unsigned long long w_p, wo_p, obs_p, code_p, con_p, phi_p, dec_p, opt_p, act_p, ret_p,
         dur_p, nobs_p, rew_p, term_p, trunc_p, st_p, conn_p, reach_p, phin_p, coden_p,
         cols_p, status_p, u_p, step_p, o_obs, o_code, o_con, o_phi, o_dec, o_opt, o_act, o_ret,
-        o_dur, q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p, value_p, sphi_p, own_p;
+        o_dur, q_p, dn_p, de_p, od_p, sd_p, id_p, ir_p, started_p, value_p, sphi_p, own_p,
+        own_next_p;
     double epsilon, option_epsilon, gamma, alpha_o, completion;
     int use_gamma, fail_boot, interrupt, ipo_primitives;
-    long long max_option_steps, executable_from;
+    long long max_option_steps, executable_from, leave_from;
     if (!PyArg_ParseTuple(args,
-                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKKKiKiKi",
+                          "nnnnnKKKKKKKKKKKKKKKKKKKKKKKdddiLddKnLKKKKKKKKKKKKKKKKKKiKiKiKL",
                           &P, &K, &A, &F, &Fo, &w_p, &wo_p, &obs_p, &code_p, &con_p, &phi_p,
                           &dec_p, &opt_p, &act_p, &ret_p, &dur_p, &nobs_p, &rew_p, &term_p,
                           &trunc_p, &st_p, &conn_p, &reach_p, &phin_p, &coden_p, &cols_p,
@@ -206,7 +209,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
                           &executable_from, &o_obs, &o_code, &o_con, &o_phi, &o_dec, &o_opt,
                           &o_act, &o_ret, &o_dur, &q_p, &dn_p, &de_p, &od_p, &sd_p, &id_p,
                           &ir_p, &started_p, &value_p, &fail_boot, &sphi_p, &interrupt,
-                          &own_p, &ipo_primitives))
+                          &own_p, &ipo_primitives, &own_next_p, &leave_from))
         return NULL;
     Py_ssize_t D = A + K;
     if (D > MAX_CHOICES) {
@@ -223,7 +226,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
     const int64_t *duration = I64(dur_p), *status = I64(status_p);
     const uint8_t *contains = U8(con_p), *terminated = U8(term_p), *truncated = U8(trunc_p);
     const uint8_t *stepped = U8(st_p), *contains_next = U8(conn_p), *reached = U8(reach_p);
-    const uint8_t *own = U8(own_p);
+    const uint8_t *own = U8(own_p), *own_next = U8(own_next_p);
     double *out_obs = F64(o_obs), *out_code = F64(o_code), *out_phi = F64(o_phi);
     double *out_ret = F64(o_ret), *q = F64(q_p), *option_delta = F64(od_p);
     double *smdp_delta = F64(sd_p), *info_return = F64(ir_p);
@@ -272,7 +275,10 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         }
         int executing = option[p] >= 0;
         int stops = executing && (reach[option[p]] || k_steps >= max_option_steps);
-        int dec_end = go && (!executing || stops || ended);
+        /* end_outside_set: an execution also ends at an s' outside its option's own set */
+        int leaves = own_next && executing && st[option[p]] >= leave_from
+                     && !own_next[p * K + option[p]];
+        int dec_end = go && (!executing || stops || ended || leaves);
         int inside = go && executing;  /* the option chose the action at s */
 
         /* Next top-level decision at s' (also the bootstrap decision d'). The values at s' are

@@ -142,6 +142,9 @@ class StepRules(NamedTuple):
     #: those updates bootstrap on ``max_a Q(s', a)`` over the primitives only
     intra_option_primitive_target: bool
     interruption: bool
+    #: an execution of an option of at least this status ends at an ``s'`` outside its own
+    #: set (``None``: never; ``HierarchicalAgent``'s ``end_outside_set``)
+    leave_from: OptionStatus | None = None
 
 
 class Learned(NamedTuple):
@@ -167,6 +170,7 @@ class AtNext(NamedTuple):
     phi: Tensor  #: ``[P, F]``: the top level's features of ``s'``
     code: Tensor | None  #: ``[P, Fo]``: the option heads' code of ``s'``, or ``None``:
     code_columns: Tensor | None  #: ... picked from ``phi`` at these ``[Fo]`` int64 columns
+    own: Tensor | None = None  #: ``[P, K]`` bool: each option's own set at ``s'``
 
 
 class StepOutputs(NamedTuple):
@@ -197,6 +201,9 @@ def transition(state: StepState, learned: Learned, at_next: AtNext, rules: StepR
     f64 = torch.float64
     reward, reached = at_next.reward.contiguous(), at_next.reached.contiguous()
     own = state.own_contains.contiguous()  # the kernel applies option_update_mask's rule
+    if rules.leave_from is not None and at_next.own is None:
+        raise ValueError("end_outside_set needs AtNext.own, the own sets at s'")
+    own_next = None if at_next.own is None else at_next.own.contiguous()
     # The [P] outputs are rows of three fresh blocks (one allocation per dtype, not one per
     # output: this runs every step).
     decision, option, action, duration, d_next, info_duration = torch.empty(
@@ -235,6 +242,8 @@ def transition(state: StepState, learned: Learned, at_next: AtNext, rules: StepR
             started.data_ptr(), 0 if value is None else value.data_ptr(),
             int(rules.failure_bootstrap_primitives),
             0 if state_phi is None else state_phi.data_ptr(), int(rules.interruption),
-            own.data_ptr(), int(rules.intra_option_primitive_target))  # fmt: skip
+            own.data_ptr(), int(rules.intra_option_primitive_target),
+            0 if rules.leave_from is None else own_next.data_ptr(),
+            int(rules.leave_from or 0))  # fmt: skip
     return new, StepOutputs(q, decision_ended, info_duration, info_return, option_delta,
                             smdp_delta, started, value)

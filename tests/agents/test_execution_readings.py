@@ -1,6 +1,7 @@
 """The readings of option execution the paper leaves open, each against updates computed by
 hand: what a timed-out option bootstraps on (``failure_bootstrap``), primitives learning from
-the options' steps (``intra_option_primitives``) and interruption (``interruption``)."""
+the options' steps (``intra_option_primitives``), interruption (``interruption``) and an
+execution's end where it leaves its option's set (``end_outside_set``)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import torch
 from hand_built import F64, NO, make_agent, make_bank, obs, prefer_option
 
 from skillchain_torch.agents import HierarchicalAgent
+from skillchain_torch.options import OptionStatus
 
 
 @pytest.mark.parametrize("native", [False, True])
@@ -175,3 +177,44 @@ def test_interruption_stops_an_option_where_it_is_no_longer_greedy(interruption,
     assert agent.decisions.tolist() == [2] and agent.options.tolist() == [-1]
     q_s0 = float(w[0, 5] @ agent.features(s0)[0])
     assert info["smdp_delta"].item() == pytest.approx(-3.0 + 12.0 - q_s0, rel=1e-12)
+
+
+@pytest.mark.parametrize("native", [False, True])
+@pytest.mark.parametrize(("leave", "status", "ends"), [
+    ("off", OptionStatus.LEARNED, False), ("always", OptionStatus.LEARNED, True),
+    ("always", OptionStatus.LEARNING, True), ("learned", OptionStatus.LEARNED, True),
+    ("learned", OptionStatus.LEARNING, False)])
+def test_end_outside_set_ends_an_execution_where_it_leaves_its_set(leave, status, ends, native):
+    """The option's set is x > 0.5, the best primitive is worth 12: the option is chosen at
+    x = 0.7, goes on at x = 0.6 and, where end_outside_set applies to its status, ends at
+    x = 0.4 (outside its own set, target not reached), where the SMDP update closes it on the
+    primitive d' = 2 (the option is not available there); otherwise it runs on outside."""
+    if native and not HierarchicalAgent(make_bank(), order=1, native=None).native:
+        pytest.skip("compiled agent kernels not built")
+    bank = make_bank()
+    bank.status[:] = int(status)
+    agent = make_agent(bank, end_outside_set=leave, native=native)
+    prefer_option(agent, value=100.0)
+    agent.q_head.weight[:, 2, 0] = 12.0
+    s0 = obs((0.7, 0.5, 0.5, 0.5))
+    agent.begin(s0)
+    assert agent.decisions.tolist() == [5]
+    yes, minus_one = torch.tensor([True]), torch.tensor([-1.0], dtype=F64)
+    info = agent.transition(obs((0.6, 0.5, 0.5, 0.5)), minus_one, NO, NO, yes)
+    assert info["decision_ended"].tolist() == [False] and agent.options.tolist() == [0]
+    w = agent.q_head.weight.clone()
+    info = agent.transition(obs((0.4, 0.5, 0.5, 0.5)), minus_one, NO, NO, yes)
+    assert not bool(info["reached"].any())
+    if not ends:
+        assert info["decision_ended"].tolist() == [False] and agent.options.tolist() == [0]
+        assert torch.equal(agent.q_head.weight, w)
+        return
+    assert info["decision_ended"].tolist() == [True] and info["duration"].tolist() == [2]
+    assert agent.decisions.tolist() == [2] and agent.options.tolist() == [-1]
+    q_s0 = float(w[0, 5] @ agent.features(s0)[0])
+    assert info["smdp_delta"].item() == pytest.approx(-2.0 + 12.0 - q_s0, rel=1e-12)
+
+
+def test_end_outside_set_names_its_choices():
+    with pytest.raises(ValueError, match="end_outside_set must be one of off, learned, always"):
+        make_agent(make_bank(), end_outside_set=True)

@@ -117,13 +117,16 @@ def half_plane_bank(P, seed):
 
 
 @needs_native
-@pytest.mark.parametrize(("gamma", "scaled", "intra", "interruption", "failure"), [
-    (1.0, False, False, False, "decision"), (0.9, False, False, False, "decision"),
-    (0.95, True, False, False, "decision"), (1.0, False, True, False, "primitives"),
-    (0.9, True, True, True, "primitives"), (1.0, False, False, True, "decision"),
-    (1.0, False, "primitives", False, "decision")])
+@pytest.mark.parametrize(("gamma", "scaled", "intra", "interruption", "failure", "leave"), [
+    (1.0, False, False, False, "decision", "off"), (0.9, False, False, False, "decision", "off"),
+    (0.95, True, False, False, "decision", "off"), (1.0, False, True, False, "primitives", "off"),
+    (0.9, True, True, True, "primitives", "off"), (1.0, False, False, True, "decision", "off"),
+    (1.0, False, "primitives", False, "decision", "off"),
+    (1.0, False, False, False, "primitives", "always"),
+    (0.9, True, True, True, "decision", "always"),
+    (1.0, False, False, False, "primitives", "learned")])
 def test_compiled_transition_agrees_with_the_torch_path(gamma, scaled, intra, interruption,
-                                                        failure):
+                                                        failure, leave):
     """Random transitions with terminations, truncations and rows not stepped: the same
     decisions and actions, TD errors and weights equal to rounding, with the discounted and
     per-feature step sizes too."""
@@ -134,9 +137,12 @@ def test_compiled_transition_agrees_with_the_torch_path(gamma, scaled, intra, in
                                 intra_option_primitives=bool(intra),
                                 intra_option_target=("primitives" if intra == "primitives"
                                                      else "decisions"),
-                                interruption=interruption,
+                                interruption=interruption, end_outside_set=leave,
                                 failure_bootstrap=failure, native=native)
               for native in (False, True)]  # fmt: skip
+    for agent in agents:  # (one option still learning its set: only the other ends outside)
+        agent.bank.status[:, 1] = int(OptionStatus.LEARNING if leave == "learned"
+                                      else OptionStatus.LEARNED)  # fmt: skip
     g = gen(2)
     start = torch.rand(P, 4, dtype=F64, generator=g)
     assert torch.equal(agents[0].begin(start), agents[1].begin(start))

@@ -202,6 +202,22 @@ def test_top_level_learning_flags_reach_the_agent(tmp_path, field):
         field == "intra_option_primitives", field == "option_interruption")
 
 
+@pytest.mark.parametrize("value", ["off", "learned", "always"])
+def test_end_outside_set_reaches_the_agent(tmp_path, value):
+    from skillchain_torch.trainers import TrainConfig
+    from skillchain_torch.trainers.cli import _config_from_args, build_parser
+    from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+
+    parser = build_parser()
+    args = parser.parse_args(["train", "--agent", "skill-chaining", "--out", str(tmp_path),
+                              "--end-outside-set", value])
+    assert _config_from_args(parser, args).end_outside_set == value
+    saved = {k: v for k, v in TrainConfig().to_dict().items() if k != "end_outside_set"}
+    assert TrainConfig.from_dict(saved).end_outside_set == "off"  # runs before the field
+    cfg = TrainConfig(agent="skill-chaining", runs=2, slots=2, end_outside_set=value).resolved()
+    assert SkillChainingRunAgent(cfg).end_outside_set == value
+
+
 def test_option_start_and_learning_flags_reach_the_config(tmp_path):
     from skillchain_torch.trainers.cli import _config_from_args, build_parser
 
