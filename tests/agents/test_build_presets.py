@@ -67,7 +67,7 @@ def test_the_default_preset_departs_in_the_documented_fields():
     assert SkillChainingAgent.build(1, order=1).discovery.reading == DEFAULT_READING
     assert set(differences(DEFAULT, PAPER)) == {
         "gestation", "gestation_positives", "initiation_start", "initiation_constrain",
-        "policy_start", "value_start", "option_alpha", "failure_bootstrap"}
+        "policy_start", "value_start", "option_alpha", "failure_bootstrap", "end_outside_set"}
 
 
 def test_keyword_arguments_override_the_preset():
