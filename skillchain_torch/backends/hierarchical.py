@@ -201,9 +201,11 @@ def transition(state: StepState, learned: Learned, at_next: AtNext, rules: StepR
     f64 = torch.float64
     reward, reached = at_next.reward.contiguous(), at_next.reached.contiguous()
     own = state.own_contains.contiguous()  # the kernel applies option_update_mask's rule
-    if rules.leave_from is not None and at_next.own is None:
-        raise ValueError("end_outside_set needs AtNext.own, the own sets at s'")
-    own_next = None if at_next.own is None else at_next.own.contiguous()
+    own_next = None  # the own sets at s', read only where executions end outside them
+    if rules.leave_from is not None:
+        if at_next.own is None:
+            raise ValueError("end_outside_set needs AtNext.own, the own sets at s'")
+        own_next = at_next.own.contiguous()
     # The [P] outputs are rows of three fresh blocks (one allocation per dtype, not one per
     # output: this runs every step).
     decision, option, action, duration, d_next, info_duration = torch.empty(
@@ -243,7 +245,7 @@ def transition(state: StepState, learned: Learned, at_next: AtNext, rules: StepR
             int(rules.failure_bootstrap_primitives),
             0 if state_phi is None else state_phi.data_ptr(), int(rules.interruption),
             own.data_ptr(), int(rules.intra_option_primitive_target),
-            0 if rules.leave_from is None else own_next.data_ptr(),
+            0 if own_next is None else own_next.data_ptr(),
             int(rules.leave_from or 0))  # fmt: skip
     return new, StepOutputs(q, decision_ended, info_duration, info_return, option_delta,
                             smdp_delta, started, value)
