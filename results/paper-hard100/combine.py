@@ -1,6 +1,7 @@
 """Figure 6 and the hard instance's claims at the paper's 100 runs (issue 30).
 
-``results/paper/hard`` ran 60 agents per kind (seeds 1000-1059). A second study ran the next 40
+``results/paper-v3/hard`` (then ``results/paper/hard``) ran 60 agents per kind (seeds
+1000-1059). A second study ran the next 40
 (``skillchain reproduce paper --instances hard --hard-runs 40 --seed 1060``). By the seed
 contract agent ``p`` of a population started at seed ``S`` is the single agent with seed
 ``S + p`` (``skillchain verify``), so the two studies' rows stacked are exactly the 100-agent
@@ -72,10 +73,10 @@ def main(argv=None) -> None:
     from trainers.study.paper_report import write_report
 
     for agent in AGENTS:
-        stack(ROOT / "results/paper/hard" / agent, args.second / "hard" / agent,
+        stack(ROOT / "results/paper-v3/hard" / agent, args.second / "hard" / agent,
               HERE / "hard" / agent)
     write_report(HERE, names=[f"hard/{a}" for a in AGENTS], quiet=True)
-    # Figures 7 and 8 need a skill-chaining checkpoint; results/paper has them at 60 runs.
+    # Figures 7 and 8 need a skill-chaining checkpoint; results/paper-v3 has them at 60 runs.
     for stale in ("fig7.png", "fig8.png"):
         if (HERE / stale).is_file():
             (HERE / stale).unlink()

@@ -7,8 +7,8 @@ import numpy as np
 from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
 from skillchain_torch.trainers.study.paper_report import WINDOWS, window
 
-RUNS = {"flat o4": "results/paper/simple/flat",
-        "sc o4": "results/paper/simple/skill-chaining",
+RUNS = {"flat o4": "results/paper-v3/simple/flat",
+        "sc o4": "results/paper-v3/simple/skill-chaining",
         "flat o5": "results/runaway/confirm/flat-o5",
         "sc o5": "results/runaway/confirm/sc-o5"}
 PAIRS = [("sc o4", "flat o4"), ("sc o5", "flat o5"), ("flat o5", "flat o4"), ("sc o5", "sc o4")]

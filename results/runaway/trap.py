@@ -1,6 +1,6 @@
 """Trace one flat agent's long episode with its Q values, and draw where it spent it.
 
-    python results/runaway/trap.py results/paper/simple/flat 13 249
+    python results/runaway/trap.py results/paper-v3/simple/flat 13 249
 
 re-runs the published agent alone to that episode (checked bit for bit against the run's
 lengths), records per step the observation, the reward, Q(s, .) before the update and the
