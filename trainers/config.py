@@ -49,7 +49,7 @@ from .config_checks import (
     check_values,
     memory_estimate,
 )
-from .config_fields import LABEL_FIELDS, LEGACY_FIELDS, RESUME_FIELDS, UNREAD_FIELDS
+from .config_fields import LABEL_FIELDS, LEGACY_FIELDS, MLP_TOP_FIELDS, RESUME_FIELDS, UNREAD_FIELDS
 
 __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "RESUME_FIELDS",
            "LEGACY_FIELDS", "UNREAD_FIELDS", "LABEL_FIELDS", "PRESET_CONFIG_FIELDS", "INT64_MAX"]
@@ -296,9 +296,12 @@ class TrainConfig:
     def mismatches(self, other: TrainConfig) -> list[str]:
         """Fields whose values differ between two resolved configs, leaving out
         ``RESUME_FIELDS``, the ``preset`` label (``LABEL_FIELDS``) and, when both are of one
-        agent kind, the fields that kind never reads (``UNREAD_FIELDS``)."""
+        agent kind, the fields that kind never reads (``UNREAD_FIELDS``; with a Fourier top
+        level on both, the MLP top level's learner, ``MLP_TOP_FIELDS``)."""
         a, b = self.resolved().to_dict(), other.resolved().to_dict()
         unread = UNREAD_FIELDS.get(self.agent, ()) if self.agent == other.agent else ()
+        if a["top_head"] == b["top_head"] == "fourier":
+            unread = (*unread, *MLP_TOP_FIELDS)
         skip = (*RESUME_FIELDS, *LABEL_FIELDS, *unread)
         return [k for k in a if k not in skip and a[k] != b[k]]
 

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -147,3 +148,30 @@ def test_the_preset_label_alone_is_no_mismatch():
     relabelled = TrainConfig(**{**paper.to_dict(), "preset": "default"})
     assert relabelled.gestation == 10 and not paper.mismatches(relabelled)
     assert "gestation" in paper.mismatches(TrainConfig(agent="skill-chaining"))
+
+
+def test_a_fourier_top_level_does_not_read_the_mlp_learner():
+    """The paper preset's MLP learner values are unread by a Fourier top level: a run saved
+    before they existed is the same run, while two MLP runs that differ in them differ."""
+    paper = TrainConfig(agent="skill-chaining", preset="paper")
+    older = TrainConfig(**{**paper.to_dict(), "top_lr": 1e-3, "top_target_update": 250,
+                           "top_bootstrap": "sarsa"})  # fmt: skip
+    assert paper.top_head == "fourier" and paper.mismatches(older) == []
+    mlp = dataclasses.replace(paper, top_head="mlp")
+    assert mlp.mismatches(dataclasses.replace(older, top_head="mlp")) == [
+        "top_lr", "top_target_update", "top_bootstrap"]
+
+
+def test_the_study_takes_a_preset():
+    """``skillchain reproduce paper --preset paper --slots 48``: every run of the study under
+    the paper's values, given options reading the study's own discoverers."""
+    from skillchain_torch.trainers.study.reproduce import paper_experiments
+
+    exps = {e.name: e for e in paper_experiments(preset="paper", slots=48)}
+    assert len(exps) == 6 and exps["hard/flat"].config.runs == 100
+    sc, given = exps["simple/skill-chaining"].config, exps["simple/given-options"].config
+    assert (sc.preset, sc.gestation, sc.slots, sc.end_outside_set) == ("paper", 10, 48, "off")
+    assert given.options == "simple/skill-chaining/options.pt" and given.gestation == 10
+    default = {e.name: e.config for e in paper_experiments()}
+    assert default["simple/skill-chaining"].mismatches(sc)  # the two studies differ
+    assert not default["simple/flat"].mismatches(exps["simple/flat"].config)  # but not flat
