@@ -124,7 +124,7 @@ def test_committed_configs_without_a_preset_load_as_the_default():
     """Every published run predates presets; they ran the default preset's values, but for
     fields added after them, which load with the value every run before them had
     (``LEGACY_FIELDS``: ``end_outside_set`` "off", the default now "learned")."""
-    paths = sorted((ROOT / "results" / "paper").glob("*/*/config.json"))
+    paths = sorted((ROOT / "results" / "paper-v3").glob("*/*/config.json"))
     assert len(paths) == 6
     for path in paths:
         raw = json.loads(path.read_text())
@@ -140,6 +140,19 @@ def test_committed_configs_without_a_preset_load_as_the_default():
         assert all(getattr(config, k) == LEGACY_FIELDS[k] for k in differ)
         if config.agent != "flat":
             assert config.end_outside_set == "off" != DEFAULT.end_outside_set
+
+
+def test_the_published_study_ran_todays_default():
+    """``results/paper/`` is the study of the library's default: every run's values are the
+    default preset's (a changed default must re-run the study or move it aside)."""
+    paths = sorted((ROOT / "results" / "paper").glob("*/*/config.json"))
+    assert len(paths) == 6
+    for path in paths:
+        config = TrainConfig.load_json(path)
+        unread = set(UNREAD_FIELDS[config.agent]) | {"order", "alpha"}
+        differ = [k for k in PRESET_CONFIG_FIELDS
+                  if k not in unread and getattr(config, k) != getattr(DEFAULT, k)]
+        assert differ == [], (path, differ)
 
 
 def test_the_preset_label_alone_is_no_mismatch():
