@@ -195,14 +195,20 @@ def build_parser() -> argparse.ArgumentParser:
                            help="runs per agent on the first instance (default 100)")
     reproduce.add_argument("--episodes", type=_positive, default=250,
                            help="episodes per run (default 250)")
-    reproduce.add_argument("--hard-runs", type=_positive, default=60,
-                           help="runs per agent on the second instance (default 60)")
+    reproduce.add_argument("--hard-runs", type=_positive, default=100,
+                           help="runs per agent on the second instance (default 100, the "
+                           "paper's count)")
     reproduce.add_argument("--hard-episodes", type=_positive, default=None,
                            help="episodes per run on the second instance (default: --episodes)")
     reproduce.add_argument("--seed", type=int, default=1000,
                            help="agent p of every kind uses seed + p (default 1000)")
     reproduce.add_argument("--instances", nargs="+", choices=("simple", "hard"),
                            default=["simple", "hard"], help="which instances (default both)")
+    reproduce.add_argument("--preset", choices=PRESET_NAMES, default="default",
+                           help="the readings every run uses (default: the library's default; "
+                           "'paper': every value the paper states)")
+    reproduce.add_argument("--slots", type=_positive, default=None,
+                           help="option slots per agent (default: the preset's)")
     reproduce.add_argument("--jobs", type=_positive, default=2,
                            help="runs in parallel, one process each (default 2)")
     reproduce.add_argument("--report-only", action="store_true",

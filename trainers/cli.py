@@ -66,7 +66,8 @@ def _reproduce(parser, args) -> int:
             path = reproduce_paper(args.out, runs=args.runs, episodes=args.episodes,
                                    hard_runs=args.hard_runs, hard_episodes=args.hard_episodes,
                                    seed=args.seed, jobs=args.jobs, instances=args.instances,
-                                   quiet=args.quiet)  # fmt: skip
+                                   quiet=args.quiet, preset=args.preset,
+                                   **({"slots": args.slots} if args.slots else {}))  # fmt: skip
     except (ValueError, RuntimeError) as err:
         parser.error(str(err))
     except KeyboardInterrupt:

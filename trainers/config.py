@@ -49,10 +49,12 @@ from .config_checks import (
     check_values,
     memory_estimate,
 )
-from .config_fields import LABEL_FIELDS, LEGACY_FIELDS, RESUME_FIELDS, UNREAD_FIELDS
+from .config_fields import LABEL_FIELDS, LEGACY_FIELDS, MLP_TOP_FIELDS, RESUME_FIELDS, UNREAD_FIELDS
 
 __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "RESUME_FIELDS",
            "LEGACY_FIELDS", "UNREAD_FIELDS", "LABEL_FIELDS", "PRESET_CONFIG_FIELDS", "INT64_MAX"]
+
+DEFAULT_MAP = "pinball_simple_single"  # the map of a config that names no environment
 
 def paper_defaults(map_name: str) -> tuple[int, float]:
     """``(order, alpha)`` of the paper for a map: (5, 0.0005) on hard maps, else (4, 0.001)."""
@@ -75,7 +77,8 @@ class TrainConfig:
         agent: registry name of the agent (``"flat"``, ``"given-options"``,
             ``"skill-chaining"``; see ``skillchain_torch.trainers.AGENTS``).
         preset: ``"default"`` (the library's) or ``"paper"`` (section 5.1's values).
-        map: a shipped Pinball map name (``MAP_NAMES``).
+        map: a shipped Pinball map name (``MAP_NAMES``; ``None``: pinball_simple_single, or
+            no map when ``env`` is set, so an env run's config records none).
         runs: P, the number of independent agents (each with its own environment).
         episodes: E, the episodes each agent runs.
         seed: agent ``p`` (and its environment) uses seed ``seed + p``.
@@ -150,7 +153,7 @@ class TrainConfig:
 
     agent: str = "flat"
     preset: str = "default"
-    map: str = "pinball_simple_single"
+    map: str | None = None
     runs: int = 1
     episodes: int = 100
     seed: int = 0
@@ -202,6 +205,11 @@ class TrainConfig:
     annealing_steps: int = 0
 
     def __post_init__(self):
+        if self.env is None and self.map is None:
+            object.__setattr__(self, "map", DEFAULT_MAP)
+        elif self.env is not None and self.map is not None:
+            raise ConfigError(f"env {self.env!r} and map {self.map!r} choose the environment "
+                              "twice: give one (map is Pinball's)", ("map",))
         # Fill what the config leaves open from its preset, so every reader sees values.
         try:
             preset = preset_named(self.preset)
@@ -275,6 +283,8 @@ class TrainConfig:
         unknown = sorted(set(data) - names)
         if unknown:
             raise ValueError(f"unknown config fields: {', '.join(unknown)}")
+        if data.get("env") is not None:  # env runs saved the unread default map until 2026-12
+            data = {**data, "map": None}
         return cls(**{**LEGACY_FIELDS, **data})
 
     def save_json(self, path: str | Path) -> None:
@@ -296,9 +306,12 @@ class TrainConfig:
     def mismatches(self, other: TrainConfig) -> list[str]:
         """Fields whose values differ between two resolved configs, leaving out
         ``RESUME_FIELDS``, the ``preset`` label (``LABEL_FIELDS``) and, when both are of one
-        agent kind, the fields that kind never reads (``UNREAD_FIELDS``)."""
+        agent kind, the fields that kind never reads (``UNREAD_FIELDS``; with a Fourier top
+        level on both, the MLP top level's learner, ``MLP_TOP_FIELDS``)."""
         a, b = self.resolved().to_dict(), other.resolved().to_dict()
         unread = UNREAD_FIELDS.get(self.agent, ()) if self.agent == other.agent else ()
+        if a["top_head"] == b["top_head"] == "fourier":
+            unread = (*unread, *MLP_TOP_FIELDS)
         skip = (*RESUME_FIELDS, *LABEL_FIELDS, *unread)
         return [k for k in a if k not in skip and a[k] != b[k]]
 

@@ -6,7 +6,7 @@ config (resume, verify), not the run's values.
 
 from __future__ import annotations
 
-__all__ = ["LABEL_FIELDS", "LEGACY_FIELDS", "RESUME_FIELDS", "UNREAD_FIELDS"]
+__all__ = ["LABEL_FIELDS", "LEGACY_FIELDS", "MLP_TOP_FIELDS", "RESUME_FIELDS", "UNREAD_FIELDS"]
 
 # Fields added after runs were published, with the behaviour every run before them had: a
 # saved config without one of them ran with this value (whatever today's default is).
@@ -36,6 +36,9 @@ _DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestati
                      "value_start",
                      "value_bonus", "option_alpha", "gestation", "convergence_threshold",
                      "max_branching")
+# The "mlp" top level's learner: a run whose top level is the built-in Fourier head never reads
+# them (so a saved Fourier run stays valid when the paper preset's MLP learner values change).
+MLP_TOP_FIELDS = ("top_lr", "top_target_update", "top_bootstrap")
 _PIECES = ("top_head", "option_head", "initiation", "top_lr", "top_target_update",
            "top_bootstrap", "epsilon_init", "annealing_steps")
 UNREAD_FIELDS = {

@@ -159,6 +159,7 @@ def test_cli_env_flags(tmp_path, capsys):
                  "--episodes", "1", "--max-episode-steps", "10", "--out", str(out)]) == 0
     config = json.loads((out / "config.json").read_text())
     assert (config["env"], config["obs_dim"], config["num_actions"]) == (MOUNTAIN_CAR, 2, 3)
+    assert config["map"] is None  # a Pinball map it never read is not recorded
     for argv, message in (
         (["--env", MOUNTAIN_CAR, "--map", "pinball_simple_single"], "choose the environment"),
         (["--env", "MountainCar-v0"], "gymnasium:ID"),
@@ -187,3 +188,14 @@ def test_a_run_with_replay_is_refused_by_verify_in_one_line(tmp_path, capsys):
     assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert "re-run the whole command" in err[-1] and "Traceback" not in "\n".join(err)
+
+
+def test_an_env_config_names_no_map():
+    """``env`` and ``map`` each choose the environment: a config takes one. Env runs saved
+    before the rule recorded the default map they never read, and load without it."""
+    assert TrainConfig().map == "pinball_simple_single"
+    assert TrainConfig(env=MOUNTAIN_CAR).map is None
+    with pytest.raises(ValueError, match="choose the environment twice"):
+        TrainConfig(env=MOUNTAIN_CAR, map="pinball_box")
+    older = {**TrainConfig(env=MOUNTAIN_CAR).to_dict(), "map": "pinball_simple_single"}
+    assert TrainConfig.from_dict(older).map is None

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -123,7 +124,7 @@ def test_committed_configs_without_a_preset_load_as_the_default():
     """Every published run predates presets; they ran the default preset's values, but for
     fields added after them, which load with the value every run before them had
     (``LEGACY_FIELDS``: ``end_outside_set`` "off", the default now "learned")."""
-    paths = sorted((ROOT / "results" / "paper").glob("*/*/config.json"))
+    paths = sorted((ROOT / "results" / "paper-v3").glob("*/*/config.json"))
     assert len(paths) == 6
     for path in paths:
         raw = json.loads(path.read_text())
@@ -141,9 +142,49 @@ def test_committed_configs_without_a_preset_load_as_the_default():
             assert config.end_outside_set == "off" != DEFAULT.end_outside_set
 
 
+def test_the_published_study_ran_todays_default():
+    """``results/paper/`` is the study of the library's default: every run's values are the
+    default preset's (a changed default must re-run the study or move it aside)."""
+    paths = sorted((ROOT / "results" / "paper").glob("*/*/config.json"))
+    assert len(paths) == 6
+    for path in paths:
+        config = TrainConfig.load_json(path)
+        unread = set(UNREAD_FIELDS[config.agent]) | {"order", "alpha"}
+        differ = [k for k in PRESET_CONFIG_FIELDS
+                  if k not in unread and getattr(config, k) != getattr(DEFAULT, k)]
+        assert differ == [], (path, differ)
+
+
 def test_the_preset_label_alone_is_no_mismatch():
     """``preset`` names where the values came from; the values decide whether runs differ."""
     paper = TrainConfig(agent="skill-chaining", preset="paper")
     relabelled = TrainConfig(**{**paper.to_dict(), "preset": "default"})
     assert relabelled.gestation == 10 and not paper.mismatches(relabelled)
     assert "gestation" in paper.mismatches(TrainConfig(agent="skill-chaining"))
+
+
+def test_a_fourier_top_level_does_not_read_the_mlp_learner():
+    """The paper preset's MLP learner values are unread by a Fourier top level: a run saved
+    before they existed is the same run, while two MLP runs that differ in them differ."""
+    paper = TrainConfig(agent="skill-chaining", preset="paper")
+    older = TrainConfig(**{**paper.to_dict(), "top_lr": 1e-3, "top_target_update": 250,
+                           "top_bootstrap": "sarsa"})  # fmt: skip
+    assert paper.top_head == "fourier" and paper.mismatches(older) == []
+    mlp = dataclasses.replace(paper, top_head="mlp")
+    assert mlp.mismatches(dataclasses.replace(older, top_head="mlp")) == [
+        "top_lr", "top_target_update", "top_bootstrap"]
+
+
+def test_the_study_takes_a_preset():
+    """``skillchain reproduce paper --preset paper --slots 48``: every run of the study under
+    the paper's values, given options reading the study's own discoverers."""
+    from skillchain_torch.trainers.study.reproduce import paper_experiments
+
+    exps = {e.name: e for e in paper_experiments(preset="paper", slots=48)}
+    assert len(exps) == 6 and exps["hard/flat"].config.runs == 100
+    sc, given = exps["simple/skill-chaining"].config, exps["simple/given-options"].config
+    assert (sc.preset, sc.gestation, sc.slots, sc.end_outside_set) == ("paper", 10, 48, "off")
+    assert given.options == "simple/skill-chaining/options.pt" and given.gestation == 10
+    default = {e.name: e.config for e in paper_experiments()}
+    assert default["simple/skill-chaining"].mismatches(sc)  # the two studies differ
+    assert not default["simple/flat"].mismatches(exps["simple/flat"].config)  # but not flat

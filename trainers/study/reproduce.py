@@ -77,7 +77,7 @@ class Experiment:
         return self.name.split("/")[1]
 
 
-def paper_experiments(runs: int = 100, episodes: int = 250, hard_runs: int = 60,
+def paper_experiments(runs: int = 100, episodes: int = 250, hard_runs: int = 100,
                       hard_episodes: int | None = None, seed: int = 1000,
                       instances=("simple", "hard"), **reading) -> list[Experiment]:  # fmt: skip
     """The paper's runs: flat, skill chaining and given options on each instance.
@@ -331,14 +331,20 @@ def run_experiments(experiments: list[Experiment], out: str | Path, jobs: int = 
     return states
 
 
-def reproduce_paper(out: str | Path, runs: int = 100, episodes: int = 250, hard_runs: int = 60,
+def reproduce_paper(out: str | Path, runs: int = 100, episodes: int = 250, hard_runs: int = 100,
                     hard_episodes: int | None = None, seed: int = 1000, jobs: int = 2,
                     instances=("simple", "hard"), quiet: bool = False,
-                    report: bool = True) -> Path:  # fmt: skip
-    """Run (or finish) every experiment, then write the figures and ``out/README.md``."""
+                    report: bool = True, **reading) -> Path:  # fmt: skip
+    """Run (or finish) every experiment, then write the figures and ``out/README.md``.
+
+    ``reading``: :class:`TrainConfig` fields every run takes instead of the defaults, e.g.
+    ``preset="paper", slots=48`` for the study under every value the paper states::
+
+        reproduce_paper("results/paper-preset", preset="paper", slots=48)
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    exps = paper_experiments(runs, episodes, hard_runs, hard_episodes, seed, instances)
+    exps = paper_experiments(runs, episodes, hard_runs, hard_episodes, seed, instances, **reading)
     (out / "experiments.json").write_text(json.dumps(
         [{"name": e.name, "config": e.config.to_dict(), "depends": e.depends} for e in exps],
         indent=1) + "\n")  # fmt: skip
