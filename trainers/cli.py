@@ -28,6 +28,7 @@ from pathlib import Path
 from .agents import AGENTS
 from .arguments import CONFIG_OPTIONS, build_parser
 from .config import UNREAD_FIELDS, TrainConfig
+from .config_fields import MLP_TOP_FIELDS
 from .out_dir import _check_out, _fail, _prepare_out, _remove_created, _remove_outputs
 from .run_outputs import source_commit, train_and_write
 
@@ -153,7 +154,7 @@ def _config_from_args(parser, args) -> TrainConfig:
         parser.error(f"--agent {agent} does not read " + ", ".join(
             f"{_flag(n)} (only {' or '.join(readers[n]) or 'no agent'})" for n in unread)
             + "; leave them out or choose that --agent")
-    learner = [n for n in ("top_lr", "top_target_update", "top_bootstrap") if n in given]
+    learner = [n for n in MLP_TOP_FIELDS if n in given]
     if learner and given.get("top_head") != "mlp":
         parser.error(", ".join(map(_flag, learner)) + " set the learner of --top-head mlp, "
                      "and the top level here is fourier (closed-form Sarsa): add --top-head mlp "

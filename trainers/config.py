@@ -56,6 +56,7 @@ __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "
 
 DEFAULT_MAP = "pinball_simple_single"  # the map of a config that names no environment
 
+
 def paper_defaults(map_name: str) -> tuple[int, float]:
     """``(order, alpha)`` of the paper for a map: (5, 0.0005) on hard maps, else (4, 0.001)."""
     return instance_defaults(map_name)
