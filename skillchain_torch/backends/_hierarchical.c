@@ -22,7 +22,9 @@
 
 #include "native_maths.h"
 
-#define MAX_CHOICES 64
+/* Decisions (primitives + option slots) and option actions per row, on the stack; the Python
+ * side (hierarchical.MAX_CHOICES) takes the torch path above it. */
+#define MAX_CHOICES 1024
 
 #define F64(p) ((double *)(uintptr_t)(p))
 #define I64(p) ((int64_t *)(uintptr_t)(p))
@@ -113,7 +115,7 @@ NATIVE_CLONES static PyObject *choose(PyObject *self, PyObject *args)
                           &dense, &u_p, &u_stride, &epsilon, &q_p, &dec_p))
         return NULL;
     if (D > MAX_CHOICES) {
-        PyErr_SetString(PyExc_ValueError, "choose: at most 64 decisions");
+        PyErr_SetString(PyExc_ValueError, "choose: at most 1024 decisions");
         return NULL;
     }
     const double *w = F64(w_p), *phi = F64(phi_p), *u = F64(u_p);
@@ -137,7 +139,7 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
                           &dec_p, &opt_p, &u_p, &u_stride, &epsilon, &act_p))
         return NULL;
     if (A > MAX_CHOICES) {
-        PyErr_SetString(PyExc_ValueError, "act: at most 64 actions");
+        PyErr_SetString(PyExc_ValueError, "act: at most 1024 actions");
         return NULL;
     }
     const double *w = F64(w_p), *code = F64(code_p), *u = F64(u_p);
@@ -213,7 +215,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         return NULL;
     Py_ssize_t D = A + K;
     if (D > MAX_CHOICES) {
-        PyErr_SetString(PyExc_ValueError, "step: at most 64 decisions");
+        PyErr_SetString(PyExc_ValueError, "step: at most 1024 decisions");
         return NULL;
     }
     double *w = F64(w_p), *w_opt = F64(wo_p);

@@ -245,3 +245,14 @@ def test_leaving_float64_turns_the_compiled_path_off():
     assert agent.native is True
     agent.to(torch.float32)
     assert agent.native is False and agent.bank.classifier.native is False
+
+
+@needs_native
+def test_more_decisions_than_the_kernel_holds_take_the_torch_path():
+    """The kernel's rows live on the stack (MAX_CHOICES): a bank past them runs in torch, and
+    asking for C there names the limit instead of failing mid-run."""
+    limit = native_hierarchical.MAX_CHOICES
+    assert SkillChainingAgent.build(1, slots=limit - 5, order=1).native is True
+    assert SkillChainingAgent.build(1, slots=limit - 4, order=1).native is False
+    with pytest.raises(ValueError, match=f"at most {limit} decisions"):
+        SkillChainingAgent.build(1, slots=limit - 4, order=1, native=True)
