@@ -22,8 +22,8 @@
 
 #include "native_maths.h"
 
-/* Decisions (primitives + option slots) and option actions per row, on the stack; the Python
- * side (hierarchical.MAX_CHOICES) takes the torch path above it. */
+/* Decisions (primitives + option slots) and option actions per row, on the stack; exported as
+ * the module's MAX_CHOICES, above which the Python side takes the torch path. */
 #define MAX_CHOICES 1024
 
 #define F64(p) ((double *)(uintptr_t)(p))
@@ -115,7 +115,7 @@ NATIVE_CLONES static PyObject *choose(PyObject *self, PyObject *args)
                           &dense, &u_p, &u_stride, &epsilon, &q_p, &dec_p))
         return NULL;
     if (D > MAX_CHOICES) {
-        PyErr_SetString(PyExc_ValueError, "choose: at most 1024 decisions");
+        PyErr_Format(PyExc_ValueError, "choose: at most %d decisions", MAX_CHOICES);
         return NULL;
     }
     const double *w = F64(w_p), *phi = F64(phi_p), *u = F64(u_p);
@@ -139,7 +139,7 @@ NATIVE_CLONES static PyObject *act(PyObject *self, PyObject *args)
                           &dec_p, &opt_p, &u_p, &u_stride, &epsilon, &act_p))
         return NULL;
     if (A > MAX_CHOICES) {
-        PyErr_SetString(PyExc_ValueError, "act: at most 1024 actions");
+        PyErr_Format(PyExc_ValueError, "act: at most %d actions", MAX_CHOICES);
         return NULL;
     }
     const double *w = F64(w_p), *code = F64(code_p), *u = F64(u_p);
@@ -215,7 +215,7 @@ NATIVE_CLONES static PyObject *step(PyObject *self, PyObject *args)
         return NULL;
     Py_ssize_t D = A + K;
     if (D > MAX_CHOICES) {
-        PyErr_SetString(PyExc_ValueError, "step: at most 1024 decisions");
+        PyErr_Format(PyExc_ValueError, "step: at most %d decisions", MAX_CHOICES);
         return NULL;
     }
     double *w = F64(w_p), *w_opt = F64(wo_p);
@@ -368,4 +368,9 @@ static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_hierarchical",
                                     "Compiled hierarchical agent step (see "
                                     "hierarchical.py).", -1, methods};
 
-PyMODINIT_FUNC PyInit__hierarchical(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__hierarchical(void)
+{
+    PyObject *m = PyModule_Create(&module);
+    if (m && PyModule_AddIntMacro(m, MAX_CHOICES) < 0) Py_CLEAR(m);
+    return m;
+}

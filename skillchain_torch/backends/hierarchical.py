@@ -74,7 +74,8 @@ __all__ = ["AVAILABLE", "AtNext", "Learned", "StepOutputs", "StepRules", "act", 
 
 AVAILABLE = _c is not None
 OBS_DIM = 4  # the step copies Pinball's 4 numbers a state
-MAX_CHOICES = 1024  # _hierarchical.c's stack rows: decisions, and option actions, per agent
+# _hierarchical.c's stack rows (decisions, and option actions, per agent), read from the kernel.
+MAX_CHOICES = _c.MAX_CHOICES if _c is not None else None
 
 
 def choose(w: Tensor, phi: Tensor, available: Tensor, rows: Tensor, dense: int,
@@ -123,7 +124,8 @@ def resolve(native: bool | None, *, option_head, top_head, top_features, device:
         "float64 option heads": not exact or option_head.weight.dtype == torch.float64,
         "a float completion_reward": not isinstance(completion_reward, Tensor),
         f"at most {MAX_CHOICES} decisions (primitives + option slots)":
-            type(top_head) is not LinearQHead or top_head.num_decisions <= MAX_CHOICES,
+            not AVAILABLE or type(top_head) is not LinearQHead
+            or top_head.num_decisions <= MAX_CHOICES,
     }
     return compiled(native, needs, builtin_type_problems({
         "the option head": (option_head, FourierOptionQHead),
