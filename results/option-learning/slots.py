@@ -18,15 +18,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from compare import WINDOWS  # this folder's script, on the path when run as a script
+from compare import fmt as interval
 
 from skillchain_torch.trainers.study.intervals import mean_ci
 
-WINDOWS = ((1, 10), (11, 25), (26, 50), (51, 100), (101, 150), (151, 200), (201, 250))
-
 
 def fmt(mean: float, half: float) -> str:
-    star = " *" if abs(mean) > half else ""
-    return f"{mean:+,.0f} ± {half:,.0f}{star}"
+    return interval(mean, half) + (" *" if abs(mean) > half else "")
 
 
 def main(folders: list[str]) -> None:
