@@ -26,6 +26,18 @@ WINDOWS = ((1, 25), (26, 50), (51, 100), (101, 200), (201, 250))
 KINDS = ("success", "timeout", "episode_end", "left_set", "truncated")
 
 
+def end_kinds(info: dict, option, terminated, truncated, max_option_steps: int):
+    """What ended each row's execution this step, as an index into ``KINDS``; -1 where no
+    execution ended. ``info`` is ``transition``'s monitoring dict and ``option [P]`` the option
+    in force during the step (-1: none)."""
+    ended = info["decision_ended"] & (option >= 0)
+    hit = info["reached"].gather(1, option.clamp(min=0)[:, None])[:, 0]
+    term, trunc = terminated.to(torch.bool), truncated.to(torch.bool)
+    kind = torch.where(hit, 0, torch.where(info["duration"] >= max_option_steps, 1,
+                       torch.where(term, 2, torch.where(trunc, 4, 3))))  # fmt: skip
+    return torch.where(ended, kind, -1)
+
+
 def main(runs: int, seed: int, map_name: str = "pinball_simple_single") -> dict:
     counts = {f"{a}-{b}": dict.fromkeys(KINDS, 0) for a, b in WINDOWS}
     transition = SkillChainingAgent.transition
@@ -34,14 +46,10 @@ def main(runs: int, seed: int, map_name: str = "pinball_simple_single") -> dict:
     def counted(self, next_obs, reward, terminated, truncated, stepped):
         option = self.option.clone()  # the option in force during this step
         info = transition(self, next_obs, reward, terminated, truncated, stepped)
-        ended = info["decision_ended"] & (option >= 0)
-        if bool(ended.any()):
-            hit = info["reached"].gather(1, option.clamp(min=0)[:, None])[:, 0]
-            term, trunc = terminated.to(torch.bool), truncated.to(torch.bool)
-            kind = torch.where(hit, 0, torch.where(info["duration"] >= self.max_option_steps, 1,
-                               torch.where(term, 2, torch.where(trunc, 4, 3))))
+        kind = end_kinds(info, option, terminated, truncated, self.max_option_steps)
+        if bool((kind >= 0).any()):
             episode = self.discovery.episode + 1  # (1-based, the episode in progress)
-            for p in ended.nonzero()[:, 0].tolist():
+            for p in (kind >= 0).nonzero()[:, 0].tolist():
                 e = int(episode[p])
                 window = next((f"{a}-{b}" for a, b in WINDOWS if a <= e <= b), None)
                 if window is not None:

@@ -35,12 +35,18 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "results" / "option-learning"))  # execution_ends
+
+from execution_ends import KINDS as END_KINDS  # noqa: E402
+from execution_ends import end_kinds  # noqa: E402
 
 from trainers.config import TrainConfig  # noqa: E402
 from trainers.population import PopulationTrainer  # noqa: E402
 
 KINDS = ("option", "primitive_covered", "primitive_uncovered")
-ENDS = ("target", "timeout", "left_set", "episode_end")
+# execution_ends.KINDS under this script's names (terminated and truncated: one episode end)
+ENDS = {"success": "target", "timeout": "timeout", "left_set": "left_set",
+        "episode_end": "episode_end", "truncated": "episode_end"}  # fmt: skip
 
 
 def measure(bank: str, runs: int, episodes: int, seed: int, end_outside_set: str | None) -> dict:
@@ -50,27 +56,20 @@ def measure(bank: str, runs: int, episodes: int, seed: int, end_outside_set: str
     trainer = PopulationTrainer(config)
     agent = trainer.agent
     steps = {k: torch.zeros(runs, dtype=torch.int64) for k in KINDS}
-    ends = {k: torch.zeros(runs, dtype=torch.int64) for k in ENDS}
+    ends = {k: torch.zeros(runs, dtype=torch.int64) for k in dict.fromkeys(ENDS.values())}
     inner = agent.transition
-    rows = torch.arange(agent.population)
+    rows = torch.arange(agent.population)  # transition's rows are agents; ``stepped`` masks
 
     def transition(next_obs, reward, terminated, truncated, stepped):
-        index = rows  # transition's rows are agents; ``stepped`` masks the finished ones
         covered = agent.contains.any(1)  # some option's set holds s (before this step)
         info = inner(next_obs, reward, terminated, truncated, stepped)
-        option = info["option"]
+        option = info["option"]  # in force during this step
         kind = torch.where(option >= 0, 0, torch.where(covered, 1, 2))
         for i, name in enumerate(KINDS):
-            steps[name].index_add_(0, index, (stepped & (kind == i)).long())
-        slot = option.clamp(min=0)
-        hit = info["reached"].gather(1, slot[:, None])[:, 0]
-        ended = stepped & (option >= 0) & info["decision_ended"]
-        episode = terminated | truncated
-        timeout = info["duration"] >= agent.max_option_steps
-        why = [ended & hit, ended & ~hit & timeout, ended & ~hit & ~timeout & ~episode,
-               ended & ~hit & ~timeout & episode]  # fmt: skip
-        for name, mask in zip(ENDS, why):
-            ends[name].index_add_(0, index, mask.long())
+            steps[name].index_add_(0, rows, (stepped & (kind == i)).long())
+        end = end_kinds(info, option, terminated, truncated, agent.max_option_steps)
+        for i, name in enumerate(END_KINDS):
+            ends[ENDS[name]].index_add_(0, rows, (stepped & (end == i)).long())
         return info
 
     agent.transition = transition
