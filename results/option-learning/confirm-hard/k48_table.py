@@ -1,0 +1,80 @@
+"""48 slots against the default's 12 on the hard instance, at full size, paired by seed (issue 30).
+
+Stacks the 48-slot blocks ``end-outside-k48-seeds*`` (seeds 1000 on, in order, checked to follow
+on) and pairs them with the first agents of ``results/paper/hard`` (12 slots, and flat): mean
+return per window and 95% t intervals over runs (``*``: excludes 0); the last block alone as the
+fresh-seed check; the sd ratio against flat over 201-250; executions' outcomes; banks filled.
+
+    python results/option-learning/confirm-hard/k48_table.py
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+from compare import WINDOWS  # noqa: E402  (this study's script)
+
+from skillchain_torch.trainers.study.intervals import mean_ci  # noqa: E402
+
+PAPER = HERE.parents[1] / "paper" / "hard"
+
+
+def blocks() -> list[Path]:
+    found = sorted((p for p in HERE.glob("end-outside-k48-seeds*") if (p / "returns.npy").exists()),
+                   key=lambda p: int(p.name[21:25]))  # finished blocks only
+    seed = 1000
+    for b in found:
+        config = json.loads((b / "config.json").read_text())
+        if config["seed"] != seed or config["slots"] != 48:
+            sys.exit(f"{b}/config.json: seed {config['seed']}, slots {config['slots']}; "
+                     f"expected seed {seed} and 48 slots")
+        seed += config["runs"]
+    return found
+
+
+def main() -> None:
+    found = blocks()
+    load = lambda name: np.concatenate([np.load(b / name) for b in found])  # noqa: E731
+    k48 = load("returns.npy")
+    n = k48.shape[0]
+    last = np.load(found[-1] / "returns.npy").shape[0]
+    k12 = np.load(PAPER / "skill-chaining/returns.npy")[:n]
+    flat = np.load(PAPER / "flat/returns.npy")[:n]
+
+    def cell(d: np.ndarray) -> str:
+        m, h = mean_ci(d)
+        return f"{m:+,.0f} ± {h:,.0f}" + (" *" if abs(m) > h else "")
+
+    def w(r: np.ndarray, a: int, b: int) -> np.ndarray:
+        return r[:, a - 1:b].mean(1)
+
+    print(f"{n} runs (seeds 1000-{999 + n}); the last block alone: {last} runs\n")
+    print(f"| episodes | 12 slots | 48 - 12 slots | 48 - 12, last {last} seeds | 48 slots - flat |"
+          " 12 slots - flat |\n|---|---:|---|---|---|---|")
+    for a, b in WINDOWS:
+        print(f"| {a}-{b} | {w(k12, a, b).mean():,.0f} | {cell(w(k48, a, b) - w(k12, a, b))} | "
+              f"{cell(w(k48, a, b)[-last:] - w(k12, a, b)[-last:])} | "
+              f"{cell(w(k48, a, b) - w(flat, a, b))} | {cell(w(k12, a, b) - w(flat, a, b))} |")
+    sd = lambda r: w(r, 201, 250).std(ddof=1)  # noqa: E731
+    print(f"\nsd over runs of the 201-250 mean / flat's: 48 slots {sd(k48) / sd(flat):.2f}, "
+          f"12 slots {sd(k12) / sd(flat):.2f}")
+    for name, outcomes in (("48", load("option_outcomes.npy")),
+                           ("12", np.load(PAPER / "skill-chaining/option_outcomes.npy")[:n])):
+        s, t, e = outcomes[:, 200:].sum((0, 1))
+        print(f"{name} slots, executions ended over 201-250: {s:,} at the target, {t:,} timeouts,"
+              f" {e:,} at the episode's end")
+    held = load("n_options.npy")
+    full = held.max(1) >= 48
+    first = [int(np.argmax(h >= 48)) + 1 for h in held[full]]
+    print(f"48 slots: {int(full.sum())}/{n} banks fill, at a median of episode "
+          f"{np.median(first):.0f}")
+
+
+if __name__ == "__main__":
+    main()
