@@ -18,7 +18,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
-from compare import WINDOWS  # noqa: E402  (this study's script)
+from compare import WINDOWS  # noqa: E402  (this study's scripts)
+from slots import fmt  # noqa: E402
 
 from skillchain_torch.trainers.study.intervals import mean_ci  # noqa: E402
 
@@ -26,11 +27,12 @@ PAPER = HERE.parents[1] / "paper" / "hard"
 
 
 def blocks() -> list[Path]:
-    found = sorted((p for p in HERE.glob("end-outside-k48-seeds*") if (p / "returns.npy").exists()),
-                   key=lambda p: int(p.name[21:25]))  # finished blocks only
+    finished = [p for p in HERE.glob("end-outside-k48-seeds*") if (p / "returns.npy").exists()]
+    configs = {b: json.loads((b / "config.json").read_text()) for b in finished}
+    found = sorted(finished, key=lambda b: configs[b]["seed"])
     seed = 1000
     for b in found:
-        config = json.loads((b / "config.json").read_text())
+        config = configs[b]
         if config["seed"] != seed or config["slots"] != 48:
             sys.exit(f"{b}/config.json: seed {config['seed']}, slots {config['slots']}; "
                      f"expected seed {seed} and 48 slots")
@@ -48,8 +50,7 @@ def main() -> None:
     flat = np.load(PAPER / "flat/returns.npy")[:n]
 
     def cell(d: np.ndarray) -> str:
-        m, h = mean_ci(d)
-        return f"{m:+,.0f} ± {h:,.0f}" + (" *" if abs(m) > h else "")
+        return fmt(*mean_ci(d))
 
     def w(r: np.ndarray, a: int, b: int) -> np.ndarray:
         return r[:, a - 1:b].mean(1)
