@@ -25,6 +25,9 @@ field                             ``default``     ``paper``
 ``end_outside_set``               ``learned``     ``off``
 ================================  ==============  ===============
 
+Both leave the option slots per agent to the map (:func:`instance_slots`: 48 on the hard
+instance, 12 elsewhere; the paper states no cap).
+
 Explicit values override a preset's (keyword arguments of ``build``, fields of ``TrainConfig``,
 flags of ``skillchain train``). This module imports nothing heavy, so the command line can read
 it before torch loads.
@@ -49,8 +52,8 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = ["Preset", "PAPER", "DEFAULT", "PRESETS", "PRESET_NAMES", "PRESET_FIELDS",
-           "preset_named", "differences", "instance_defaults", "env_order", "env_alpha",
-           "env_option_alpha", "env_values", "TOP_LEARNER"]
+           "preset_named", "differences", "instance_defaults", "instance_slots", "env_order",
+           "env_alpha", "env_option_alpha", "env_values", "TOP_LEARNER"]
 
 # The "mlp" top level's learner (agents/pieces.py), screened on Acrobot-v1 (seeds 0-9,
 # results/neural/README.md): a target copied every 250 updates propagates a return of gamma = 1
@@ -108,6 +111,23 @@ def instance_defaults(map_name: str | None) -> tuple[int, float]:
     return (5, 0.0005) if map_name is not None and "hard" in map_name else (4, 0.001)
 
 
+def instance_slots(map_name: str | None) -> int:
+    """The default number of option slots per agent (K) for a Pinball map: 48 on the second
+    instance (maps whose name contains ``"hard"``), else 12 (off Pinball too).
+
+    The paper has no slot limit, only the branching factor of 3; a cap is memory's. At 100 runs
+    x 250 on seeds 1000-1099 (``results/option-learning/README.md``), 48 slots beat 12 on the
+    hard instance in every window from episode 51 (+3,132 +- 1,418 over 201-250) and cost
+    episodes 26-50 there (-6,961 +- 3,389), while on the simple one 48 cost 26-50 (-646 +- 230)
+    and gained nothing later; both caps still fill (12 by episode 27, 48 by episode 40).
+
+    Example:
+        >>> instance_slots("pinball_hard_two_starts"), instance_slots("pinball_simple_single")
+        (48, 12)
+    """
+    return 48 if map_name is not None and "hard" in map_name else 12
+
+
 @dataclass(frozen=True)
 class Preset:
     """The values a skill-chaining agent is built from (see the module docstring).
@@ -117,7 +137,8 @@ class Preset:
     ``max_option_steps``, ``max_branching``, ``convergence_episodes``, ``overlap``,
     ``balanced``, ``capacity``, ``distance``, ``degree``, ``lr``, ``sweeps``) only through
     :meth:`SkillChainingAgent.build`. ``order`` / ``alpha`` ``None``: the paper's value for
-    the map (:func:`instance_defaults`).
+    the map (:func:`instance_defaults`); ``slots`` ``None``: the library's for the map
+    (:func:`instance_slots`).
     """
 
     name: str
@@ -142,7 +163,7 @@ class Preset:
     value_start: str
     value_bonus: float
     # discovery
-    slots: int
+    slots: int | None
     gestation: int
     max_branching: int
     convergence_threshold: float
@@ -200,7 +221,7 @@ PAPER = Preset(
     policy_start="zero",  # 5.1: gestation's off-policy updates, from zero weights
     value_start="max-sample",  # 5.1: Q(s, o) = the max of the values sampled in gestation
     value_bonus=0.0,  # 5.1: nothing added to that maximum
-    slots=12,  # silent (it has no slot limit): library default
+    slots=None,  # silent (it has no slot limit): the library's per map, instance_slots
     gestation=10,  # 5.1: a gestation period of 10 episodes
     max_branching=3,  # 5.1: a maximum branching factor of 3
     convergence_threshold=0.15,  # 5.1: weights changed on average less than 0.15 ...

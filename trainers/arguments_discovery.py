@@ -27,7 +27,8 @@ def add_discovery_arguments(parser: argparse.ArgumentParser) -> None:
         "--slots",
         type=int,
         default=None,
-        help="option slots per agent for --agent skill-chaining (default 12)",
+        help="option slots per agent for --agent skill-chaining (default: 48 on the hard "
+        "Pinball instance, else 12)",
     )
     parser.add_argument(
         "--initiation-bias",

@@ -37,6 +37,7 @@ from skillchain_torch.presets import (
     TOP_LEARNER,
     env_values,
     instance_defaults,
+    instance_slots,
     preset_named,
 )
 from skillchain_torch.resources import available_memory
@@ -96,7 +97,8 @@ class TrainConfig:
             ``None``: agent p takes saved agent ``p mod N`` (the paper's Figure 4 set-up,
             each agent given the options one skill-chaining run discovered).
         slots: (preset) K, option slots per agent of ``--agent skill-chaining`` (when all are
-            used the agent creates no more options).
+            used the agent creates no more options); the presets leave it to the map: 48 on
+            the hard instance, else 12 (:func:`~skillchain_torch.presets.instance_slots`).
         initiation_bias, initiation_centered: (preset) the initiation classifiers'
             ``initial_bias`` and ``centered`` (see
             :class:`~skillchain_torch.options.InitiationClassifier`).
@@ -219,6 +221,8 @@ class TrainConfig:
         for name in PRESET_CONFIG_FIELDS:
             if getattr(self, name) is None and not self._per_env(name):
                 object.__setattr__(self, name, getattr(preset, name))
+        if self.slots is None:  # the presets leave it to the map (48 on the hard instance)
+            object.__setattr__(self, "slots", instance_slots(self.map))
 
     def _per_env(self, name: str) -> bool:  # left None until resolved() knows the env's size
         return name == "option_alpha" and self.env is not None

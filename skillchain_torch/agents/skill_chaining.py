@@ -55,6 +55,7 @@ from skillchain_torch.presets import (
     Preset,
     env_values,
     instance_defaults,
+    instance_slots,
     preset_named,
 )
 
@@ -170,6 +171,8 @@ class SkillChainingAgent(HierarchicalAgent):
         sizes = {k: v for k in ("obs_dim", "num_actions") if (v := kwargs.pop(k, None)) is not None}
         p = preset_named(preset).replace(**fields)
         order, alpha = instance_defaults(map)
+        if p.slots is None:  # the library's for the map (off Pinball, map None: 12)
+            p = p.replace(slots=instance_slots(map))
         if "obs_dim" in sizes:  # off Pinball: from the env's size, as TrainConfig.resolved
             order, alpha, scaled = env_values(p, sizes["obs_dim"], p.order)
             if "option_alpha" not in fields:

@@ -7,7 +7,14 @@ import pytest
 
 from skillchain_torch.agents import SkillChainingAgent
 from skillchain_torch.discovery.readings import DEFAULT_READING, FIRST_READING
-from skillchain_torch.presets import DEFAULT, PAPER, PRESET_FIELDS, differences, preset_named
+from skillchain_torch.presets import (
+    DEFAULT,
+    PAPER,
+    PRESET_FIELDS,
+    differences,
+    instance_slots,
+    preset_named,
+)
 
 
 def built_values(agent: SkillChainingAgent) -> dict:
@@ -43,6 +50,7 @@ def built_values(agent: SkillChainingAgent) -> dict:
 def test_every_preset_value_reaches_the_agent(preset):
     agent = SkillChainingAgent.build(2, preset=preset.name, order=1)
     expected = {k: v for k, v in preset.to_dict().items() if k not in ("order", "alpha")}
+    expected["slots"] = 12  # (the preset leaves it to the map: the first instance's)
     assert built_values(agent) == expected
     assert set(expected) | {"order", "alpha"} == set(PRESET_FIELDS)
 
@@ -68,6 +76,22 @@ def test_the_default_preset_departs_in_the_documented_fields():
     assert set(differences(DEFAULT, PAPER)) == {
         "gestation", "gestation_positives", "initiation_start", "initiation_constrain",
         "policy_start", "value_start", "option_alpha", "failure_bootstrap", "end_outside_set"}
+
+
+@pytest.mark.parametrize("preset", ["default", "paper"])
+def test_the_slot_cap_is_the_maps_unless_given(preset):
+    """48 option slots on the hard instance, 12 on the simple one and off Pinball (the
+    full-size evidence is in ``instance_slots``'s docstring); an explicit value wins."""
+    assert (DEFAULT.slots, PAPER.slots) == (None, None)
+    hard = SkillChainingAgent.build(1, preset=preset, order=1, map="pinball_hard_two_starts")
+    simple = SkillChainingAgent.build(1, preset=preset, order=1, map="pinball_simple_single")
+    assert (hard.bank.slots, simple.bank.slots) == (48, 12)
+    assert hard.num_decisions == 5 + 48  # the top level has a value per option
+    given = SkillChainingAgent.build(1, preset=preset, order=1, map="pinball_hard_single",
+                                     slots=7)  # fmt: skip
+    assert given.bank.slots == 7
+    assert [instance_slots(m) for m in ("pinball_hard_single", "pinball_box", None)] == [
+        48, 12, 12]
 
 
 def test_keyword_arguments_override_the_preset():

@@ -55,8 +55,11 @@ def _flatten(state, prefix=""):
 
 def test_config_fields_a_preset_fills_are_preset_fields():
     assert set(PRESET_CONFIG_FIELDS) <= set(PRESET_FIELDS)
-    assert TrainConfig().to_dict() == {**TrainConfig().to_dict(),
-                                       **{k: getattr(DEFAULT, k) for k in PRESET_CONFIG_FIELDS}}
+    preset = {k: getattr(DEFAULT, k) for k in PRESET_CONFIG_FIELDS}
+    assert TrainConfig().to_dict() == {**TrainConfig().to_dict(), **preset, "slots": 12}
+    hard = TrainConfig(map="pinball_hard_two_starts")
+    assert (preset["slots"], hard.slots, TrainConfig(env="CartPole-v1").slots) == (None, 48, 12)
+    assert TrainConfig(map="pinball_hard_two_starts", slots=12).slots == 12  # given wins
 
 
 @pytest.mark.parametrize("preset", ["default", "paper"])
@@ -134,8 +137,12 @@ def test_committed_configs_without_a_preset_load_as_the_default():
         assert not config.mismatches(config)
         unread = set(UNREAD_FIELDS[config.agent])
         later = {k for k in LEGACY_FIELDS if k not in raw}
+        default = TrainConfig(map=config.map)
         differ = {k for k in PRESET_CONFIG_FIELDS if k not in unread | {"order", "alpha"}
-                  and getattr(config, k) != getattr(DEFAULT, k)}
+                  and getattr(config, k) != getattr(default, k)}
+        if "slots" in differ:  # 12 everywhere until the hard instance's became 48
+            assert "hard" in config.map and config.slots == 12
+            differ.remove("slots")
         assert differ <= later, (path, differ - later)
         assert all(getattr(config, k) == LEGACY_FIELDS[k] for k in differ)
         if config.agent != "flat":
@@ -150,8 +157,9 @@ def test_the_published_study_ran_todays_default():
     for path in paths:
         config = TrainConfig.load_json(path)
         unread = set(UNREAD_FIELDS[config.agent]) | {"order", "alpha"}
+        default = TrainConfig(map=config.map)  # (slots: the map's, 48 on the hard instance)
         differ = [k for k in PRESET_CONFIG_FIELDS
-                  if k not in unread and getattr(config, k) != getattr(DEFAULT, k)]
+                  if k not in unread and getattr(config, k) != getattr(default, k)]
         assert differ == [], (path, differ)
 
 

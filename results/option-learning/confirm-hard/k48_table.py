@@ -1,7 +1,8 @@
 """48 slots against the default's 12 on the hard instance, at full size, paired by seed (issue 30).
 
 Stacks the 48-slot blocks ``end-outside-k48-seeds*`` (seeds 1000 on, in order, checked to follow
-on) and pairs them with the first agents of ``results/paper/hard`` (12 slots, and flat): mean
+on) and pairs them with the first agents of ``results/paper-k12/hard`` (12 slots, the study's
+hard arm until the default became 48 there) and ``results/paper/hard/flat``: mean
 return per window and 95% t intervals over runs (``*``: excludes 0); the last block alone as the
 fresh-seed check; the sd ratio against flat over 201-250; executions' outcomes; banks filled.
 
@@ -23,7 +24,8 @@ from slots import fmt  # noqa: E402
 
 from skillchain_torch.trainers.study.intervals import mean_ci  # noqa: E402
 
-PAPER = HERE.parents[1] / "paper" / "hard"
+PAPER = HERE.parents[1] / "paper" / "hard"  # flat
+K12 = HERE.parents[1] / "paper-k12" / "hard"  # the default's 12 slots, same seeds
 
 
 def blocks() -> list[Path]:
@@ -46,7 +48,7 @@ def main() -> None:
     k48 = load("returns.npy")
     n = k48.shape[0]
     last = np.load(found[-1] / "returns.npy").shape[0]
-    k12 = np.load(PAPER / "skill-chaining/returns.npy")[:n]
+    k12 = np.load(K12 / "skill-chaining/returns.npy")[:n]
     flat = np.load(PAPER / "flat/returns.npy")[:n]
 
     def cell(d: np.ndarray) -> str:
@@ -66,7 +68,7 @@ def main() -> None:
     print(f"\nsd over runs of the 201-250 mean / flat's: 48 slots {sd(k48) / sd(flat):.2f}, "
           f"12 slots {sd(k12) / sd(flat):.2f}")
     for name, outcomes in (("48", load("option_outcomes.npy")),
-                           ("12", np.load(PAPER / "skill-chaining/option_outcomes.npy")[:n])):
+                           ("12", np.load(K12 / "skill-chaining/option_outcomes.npy")[:n])):
         s, t, e = outcomes[:, 200:].sum((0, 1))
         print(f"{name} slots, executions ended over 201-250: {s:,} at the target, {t:,} timeouts,"
               f" {e:,} at the episode's end")
