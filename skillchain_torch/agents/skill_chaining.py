@@ -132,8 +132,9 @@ class SkillChainingAgent(HierarchicalAgent):
             preset: ``"default"`` (the library's, which ``skillchain train`` builds) or
                 ``"paper"`` (section 5.1's values); see :mod:`skillchain_torch.presets`.
             seed: agent p's random streams are keyed by ``seed + p``.
-            map: the Pinball map whose paper ``order`` / ``alpha`` apply where the preset leaves
-                them to the instance (``None``: the first instance's, 4 and 0.001).
+            map: the Pinball map whose paper ``order`` / ``alpha`` and library ``slots`` apply
+                where the preset leaves them to the instance (``None``: the first instance's, 4,
+                0.001 and 12 slots; the hard instance has 48).
             **kwargs: any :class:`~skillchain_torch.presets.Preset` field (``slots``,
                 ``gestation``, ``option_alpha``, ``balanced``, ...) overrides the preset's
                 value; ``top_head``, ``option_head``, ``initiation`` name the pieces
