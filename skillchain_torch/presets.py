@@ -105,10 +105,15 @@ def env_values(preset: Preset, dim: int, order: int | None = None) -> tuple[int,
     return order, env_alpha(order, dim), env_option_alpha(preset, dim)
 
 
+def _second_instance(map_name: str | None) -> bool:
+    """Whether a Pinball map is the paper's second instance: its name contains ``"hard"``."""
+    return map_name is not None and "hard" in map_name
+
+
 def instance_defaults(map_name: str | None) -> tuple[int, float]:
     """The paper's top-level ``(order, alpha)`` for a Pinball map: (5, 0.0005) on the second
     instance (maps whose name contains ``"hard"``), else (4, 0.001) (section 5.1)."""
-    return (5, 0.0005) if map_name is not None and "hard" in map_name else (4, 0.001)
+    return (5, 0.0005) if _second_instance(map_name) else (4, 0.001)
 
 
 def instance_slots(map_name: str | None) -> int:
@@ -119,13 +124,13 @@ def instance_slots(map_name: str | None) -> int:
     x 250 on seeds 1000-1099 (``results/option-learning/README.md``), 48 slots beat 12 on the
     hard instance in every window from episode 51 (+3,132 +- 1,418 over 201-250) and cost
     episodes 26-50 there (-6,961 +- 3,389), while on the simple one 48 cost 26-50 (-646 +- 230)
-    and gained nothing later; both caps still fill (12 by episode 27, 48 by episode 40).
+    and gained nothing later; both caps still fill (at a median of episode 26 and 40).
 
     Example:
         >>> instance_slots("pinball_hard_two_starts"), instance_slots("pinball_simple_single")
         (48, 12)
     """
-    return 48 if map_name is not None and "hard" in map_name else 12
+    return 48 if _second_instance(map_name) else 12
 
 
 @dataclass(frozen=True)
