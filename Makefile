@@ -2,7 +2,8 @@
 #   make demo   a short skill-chaining run on Pinball: TensorBoard logs and figures under runs/demo
 #   make test   the whole test suite
 # Both create .venv on first use. torch is pinned first so pip takes the local CPU build
-# instead of pulling several GB of CUDA wheels.
+# instead of pulling several GB of CUDA wheels. --no-cache-dir: a CI machine once ran out of
+# disk mid-install (ENOSPC), and the cache only doubles the wheels on a one-off install.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -10,9 +11,9 @@ TORCH_PIN := torch==2.13.0
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet $(TORCH_PIN)
-	$(PY) -m pip install --quiet -e ".[dev,bench]"
+	$(PY) -m pip install --quiet --no-cache-dir --upgrade pip
+	$(PY) -m pip install --quiet --no-cache-dir $(TORCH_PIN)
+	$(PY) -m pip install --quiet --no-cache-dir -e ".[dev,bench]"
 	touch $@
 
 .PHONY: install test demo lint bench
