@@ -30,7 +30,24 @@ import numpy as np
 from .blocks import ShardedRun, block_config, previous_driver_wall
 from .config import TrainConfig
 
-__all__ = ["merge_blocks", "block_trajectory"]
+__all__ = ["merge_blocks", "block_trajectory", "run_wall_time"]
+
+
+def run_wall_time(driver: float, records: dict) -> float:
+    """A sharded run's wall time: the drivers' recorded time, but never less than its longest
+    block's. A driver records its time only when it stops cleanly or on Ctrl-C, so a run resumed
+    after its driver was killed (a session's end) would otherwise report only the last driver's
+    share, while each block's time survives in its checkpoints.
+
+    Example:
+        >>> run_wall_time(1716.0, {(0, 50): {"wall_time_s": 10513.0},
+        ...                        (50, 100): {"wall_time_s": 9800.0}})
+        10513.0
+        >>> run_wall_time(4000.0, {(0, 50): {"wall_time_s": 3600.0}})
+        4000.0
+    """
+    longest = max((float(r["wall_time_s"]) for r in records.values()), default=0.0)
+    return max(float(driver), longest)
 
 
 def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float,
@@ -61,11 +78,11 @@ def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float,
     save_learning_curve(returns, out / "learning_curve.png",
                         title=f"{cfg.agent} on {cfg.env_name} ({cfg.runs} runs)")
     steps = sum(r["agent_steps"] for r in records.values())
-    previous = previous_driver_wall(out)
+    total = run_wall_time(previous_driver_wall(out) + wall, records)
     info = {
-        "wall_time_s": previous + wall,
+        "wall_time_s": total,
         "agent_steps": steps,
-        "agent_steps_per_second": steps / (previous + wall) if previous + wall > 0 else 0.0,
+        "agent_steps_per_second": steps / total if total > 0 else 0.0,
         "block_wall_time_s": sum(r["wall_time_s"] for r in records.values()),
         "workers": workers,
         "block_size": max(b - a for a, b in run.spans),
