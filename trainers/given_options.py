@@ -68,7 +68,25 @@ def load_given_options(path, population: int, seed: int = 0,
     bank.free(bank.status == OptionStatus.GESTATING)
     bank.set_status(bank.live(), OptionStatus.LEARNED)
     _warn_empty(path, saved, index)
+    if saved.obs_dim == OBS_DIM:  # the probe grid is Pinball's
+        _warn_dead(path, saved, index)
     return bank
+
+
+def _warn_dead(path, saved: OptionBank, index: list[int]) -> None:
+    """Log the saved agents whose executable options all have empty initiation sets (on the
+    Figure-5 probe grid): the agents given them can never take an option. The paper preset's
+    hard-instance banks are all of this kind (sets true everywhere, refitted on timeouts)."""
+    from .study.option_census import dead_agents
+
+    executable = saved.executable().any(-1).tolist()
+    dead = dead_agents(saved, sorted({a for a in index if executable[a]}))
+    if dead:
+        users = sum(index.count(a) for a in dead)
+        logger.warning("%s: no option of saved agent(s) %s holds a state of the Figure-5 probe "
+                       "grid (every initiation set is empty); %d of this run's %d agents will "
+                       "likely never take an option and learn as flat agents",
+                       path, dead, users, len(index))  # fmt: skip
 
 
 def _warn_empty(path, saved: OptionBank, index: list[int]) -> None:

@@ -292,3 +292,23 @@ def test_a_skill_chaining_run_saves_its_map_with_its_options(tmp_path):
     assert bank.map == "pinball_box" and not bank.legacy
     with pytest.raises(ValueError, match="learned with map = 'pinball_box'"):
         load_given_options(tmp_path / "options.pt", 1, map="pinball_simple_single")
+
+
+def test_options_whose_sets_are_all_empty_warn(tmp_path, caplog):
+    """The paper preset's hard banks hold executable options whose sets were refitted on
+    timeouts until they hold nothing: their given agents learn as flat ones, silently."""
+    bank = OptionBank.load(_bank(tmp_path / "three.pt", population=3))
+    clf = bank.classifier
+    clf.trained[1, 0] = True  # agent 1's one option, fitted to nothing: logit -1 everywhere
+    clf.weight[1, 0] = 0.0
+    clf.bias[1, 0] = -1.0
+    bank.save(tmp_path / "dead.pt")
+    with caplog.at_level(logging.WARNING):
+        load_given_options(tmp_path / "dead.pt", 3, map="pinball_box", agent=None)
+    assert ("no option of saved agent(s) [1] holds a state of the Figure-5 probe grid (every "
+            "initiation set is empty); 1 of this run's 3 agents will likely never take an "
+            "option") in caplog.text, caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        load_given_options(tmp_path / "dead.pt", 2, map="pinball_box", agent=0)
+    assert caplog.text == ""  # agent 0's set is true everywhere

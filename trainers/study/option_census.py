@@ -29,7 +29,29 @@ from skillchain_torch.options import OptionBank
 
 from ..option_monitor import probe_observations
 
-__all__ = ["census", "main"]
+__all__ = ["census", "dead_agents", "main"]
+
+
+@torch.no_grad()
+def dead_agents(bank: OptionBank, agents=None, resolution: int = 12) -> list[int]:
+    """The agents (of ``agents``, default all) none of whose executable options holds a state of
+    the probe grid: agents that will likely never take an option. Stops at each agent's first
+    usable option, so a healthy bank is checked in about one option per agent (:func:`census`
+    visits every option, since it measures coverage). Pinball observations only (``[., 4]``).
+
+    Example:
+        >>> from skillchain_torch.options import OptionBank, OptionStatus
+        >>> bank = OptionBank.build(population=2, slots=2, order=1)
+        >>> bank.status[0, 0] = int(OptionStatus.LEARNING)    # untrained: true everywhere
+        >>> dead_agents(bank, resolution=4)
+        [1]
+    """
+    probe = probe_observations(resolution, dtype=bank.classifier.weight.dtype)
+    executable = bank.executable().cpu().numpy()
+    agents = range(executable.shape[0]) if agents is None else agents
+    return [p for p in agents
+            if not any(bool(bank.classifier.contains_points(p, k, probe).any())
+                       for k in np.flatnonzero(executable[p]))]  # fmt: skip
 
 
 @torch.no_grad()
