@@ -2,6 +2,7 @@
 
 import doctest
 import json
+from pathlib import Path
 
 import numpy as np
 
@@ -45,3 +46,26 @@ def test_the_tables_print_t_intervals_and_say_so(tmp_path):
     assert diff_cell == "{:+,.0f} ± {:,.0f}".format(*diff_ci(SC[:, 0], FLAT[:, 0]))
     assert not diff_cell.endswith("*")
     assert json.loads((tmp_path / "report.json").read_text())["simple"][0]["holds"] is False
+
+
+def test_committed_figures_are_kept_when_the_checkpoints_are_gone(tmp_path):
+    """A fresh clone has the study's figures but not the checkpoints that drew them:
+    ``--report-only`` there used to drop the figures from the report."""
+    _run(tmp_path / "simple" / "flat", FLAT, "flat")
+    _run(tmp_path / "simple" / "skill-chaining", SC, "skill-chaining")
+    text = write_report(tmp_path, quiet=True).read_text()
+    assert "need the skill-chaining run's checkpoint" in text and "(fig4b.png)" not in text
+    for name in ("fig4b.png", "fig5.png"):
+        (tmp_path / name).write_bytes(b"\x89PNG")
+    text = write_report(tmp_path, quiet=True).read_text()
+    assert "![greedy solutions](fig4b.png)" in text and "![initiation sets](fig5.png)" in text
+    assert "checkpoints are not here to redraw them" in text
+    assert (tmp_path / "fig4b.png").read_bytes() == b"\x89PNG"  # not overwritten
+
+
+def test_the_published_report_carries_its_discussion_as_committed():
+    """``results/paper/README.md`` ends with ``DISCUSSION.md``; after editing the discussion,
+    ``skillchain reproduce paper --out results/paper --report-only`` rewrites the report."""
+    study = Path(__file__).resolve().parents[3] / "results" / "paper"
+    readme, discussion = (study / name for name in ("README.md", "DISCUSSION.md"))
+    assert readme.read_text().rstrip().endswith(discussion.read_text().rstrip())
