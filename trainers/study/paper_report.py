@@ -261,8 +261,9 @@ def _figures(out: Path, instance: str, runs: dict, quiet: bool) -> list[str]:
     except (ValueError, FileNotFoundError) as err:
         kept = [name for name in (sol, sets) if (out / f"{name}.png").is_file()]
         if len(kept) == 2:  # a fresh clone: the figures are committed, the checkpoints are not
-            return lines + [f"![greedy solutions]({sol}.png)", "", f"![initiation sets]({sets}.png)",
-                            "", f"({sol} and {sets} as drawn when the run finished: its "
+            return lines + [f"![greedy solutions]({sol}.png)", "",
+                            f"![initiation sets]({sets}.png)", "",
+                            f"({sol} and {sets} as drawn when the run finished: its "
                             "checkpoints are not here to redraw them.)", ""]  # fmt: skip
         return lines + [f"(Figures {sol} and {sets} need the skill-chaining run's checkpoint: "
                         f"{err})", ""]
