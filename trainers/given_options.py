@@ -83,10 +83,12 @@ def _warn_dead(path, saved: OptionBank, index: list[int]) -> None:
     dead = dead_agents(saved, sorted({a for a in index if executable[a]}))
     if dead:
         users = sum(index.count(a) for a in dead)
+        named = str(dead) if len(dead) <= 8 else \
+            f"[{', '.join(map(str, dead[:8]))}, ...] ({len(dead)} in all)"
         logger.warning("%s: no option of saved agent(s) %s holds a state of the Figure-5 probe "
                        "grid (every initiation set is empty); %d of this run's %d agents will "
                        "likely never take an option and learn as flat agents",
-                       path, dead, users, len(index))  # fmt: skip
+                       path, named, users, len(index))  # fmt: skip
 
 
 def _warn_empty(path, saved: OptionBank, index: list[int]) -> None:

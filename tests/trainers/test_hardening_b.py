@@ -312,3 +312,15 @@ def test_options_whose_sets_are_all_empty_warn(tmp_path, caplog):
     with caplog.at_level(logging.WARNING):
         load_given_options(tmp_path / "dead.pt", 2, map="pinball_box", agent=0)
     assert caplog.text == ""  # agent 0's set is true everywhere
+
+
+def test_many_dead_agents_are_named_in_one_short_line(tmp_path, caplog):
+    bank = OptionBank.load(_bank(tmp_path / "many.pt", population=12))
+    bank.classifier.trained[:, 0] = True  # every agent's one option fitted to nothing
+    bank.classifier.weight[:, 0] = 0.0
+    bank.classifier.bias[:, 0] = -1.0
+    bank.save(tmp_path / "dead.pt")
+    with caplog.at_level(logging.WARNING):
+        load_given_options(tmp_path / "dead.pt", 12, map="pinball_box", agent=None)
+    assert "saved agent(s) [0, 1, 2, 3, 4, 5, 6, 7, ...] (12 in all) holds" in caplog.text
+    assert "12 of this run's 12 agents will likely never take an option" in caplog.text
