@@ -44,7 +44,7 @@ SLICES = HERE / "hard" / "given-slices"
 ARM = HERE / "hard" / "given-options"
 DISCOVERERS = HERE / "hard" / "skill-chaining"
 PARTIAL = ROOT / "results/option-learning/given-hard/k48-study-partial"  # its episodes 1-75
-ARRAYS = ("returns.npy", "lengths.npy", "n_options.npy", "option_outcomes.npy")
+ARRAYS = ("returns.npy", "lengths.npy")  # what a given-options run writes
 
 
 def _experiments():
