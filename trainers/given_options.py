@@ -44,7 +44,8 @@ def load_given_options(path, population: int, seed: int = 0,
 
     Options that were executable (LEARNING or LEARNED) become LEARNED; gestating ones, never
     executed and with no initiation set yet, are dropped (their slots emptied; a warning is
-    logged when that leaves an agent without options). ``map``: the run's map; a bank that
+    logged when that leaves an agent without options; another when all of a saved agent's
+    initiation sets are empty on Pinball's probe grid). ``map``: the run's map; a bank that
     records another one is refused (``ValueError``), as is one for another observation size
     or action count than Pinball's, or an ``agent`` the file does not hold."""
     seeds = torch.arange(population, dtype=torch.int64) + int(seed)
