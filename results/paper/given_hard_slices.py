@@ -79,6 +79,21 @@ def _same(made: Path, study: Path, a: int, b: int, why: str) -> None:
         sys.exit(f"{made} differs from {study} rows {a}-{b} over episodes 1-{n}: {why}")
 
 
+def _shown(path: Path) -> Path:
+    """``path`` relative to the repository where it lies inside it."""
+    return path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
+
+
+def _copy_config(src: Path, dst: Path) -> None:
+    """``src`` with its options bank named relative to the repository: the absolute path of
+    the machine that made it means nothing on another (the bank itself is not committed)."""
+    config = json.loads(src.read_text())
+    bank = Path(config["options"])
+    if bank.is_absolute() and bank.is_relative_to(ROOT):
+        config["options"] = str(bank.relative_to(ROOT))
+    dst.write_text(json.dumps(config, indent=2) + "\n")
+
+
 def run_slice(a: int, b: int) -> Path:
     """Make slice ``[a, b)`` end to end; returns its committed folder."""
     exps = _experiments()
@@ -96,14 +111,15 @@ def run_slice(a: int, b: int) -> Path:
         _same(given_dir / name, PARTIAL / name, a, b, "the given agents are not the lost run's")
     out = SLICES / f"{a}-{b}"
     out.mkdir(parents=True, exist_ok=True)
-    for name in ARRAYS + ("config.json",):
+    for name in ARRAYS:
         shutil.copyfile(given_dir / name, out / name)
+    _copy_config(given_dir / "config.json", out / "config.json")
     info = json.loads((given_dir / "run_info.json").read_text())
     info["discoverers_wall_time_s"] = sc_wall
     info["discoverers_match_the_study"] = True
     (out / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")
     print(f"slice {a}-{b}: discoverers {sc_wall:,.0f} s (match the study), given options "
-          f"{given_wall:,.0f} s -> {out.relative_to(ROOT)}")
+          f"{given_wall:,.0f} s -> {_shown(out)}")
     return out
 
 
@@ -144,7 +160,7 @@ def stack() -> None:
                               "discoverers_wall_time_s: re-making their options)"}
     info["agent_steps_per_second"] = info["agent_steps"] / info["wall_time_s"]
     (ARM / "run_info.json").write_text(json.dumps(info, indent=2) + "\n")
-    print(f"{ARM.relative_to(ROOT)}: {len(spans)} slices stacked")
+    print(f"{_shown(ARM)}: {len(spans)} slices stacked")
 
 
 def main(argv=None) -> None:
