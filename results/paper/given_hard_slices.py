@@ -4,8 +4,9 @@ session: the study's own command cannot, because its options banks are not commi
 Why: the arm needs the 100 discoverers' option banks (``hard/skill-chaining/options.pt``,
 ~130 MB, not committed). The nineteenth session made the arm, but its work never landed (its CI
 machine ran out of disk), and the next session started on a fresh machine without the banks.
-Re-making them costs ~175-205 core-seconds per agent and the arm ~210-320 more: about 5.3 hours
-on 2 cores, more than a session. So each slice ``[a, b)`` of agents is made end to end:
+A 12-agent slice costs ~325-355 core-seconds per agent, discoverers and given agents together
+(its slowest agent sets its wall time): about 9 core-hours for the arm, more than a session on 2
+cores. So each slice ``[a, b)`` of agents is made end to end:
 
 1. its discoverers: the study's skill-chaining arm for agents ``[a, b)`` (by the seed contract,
    ``runs = b - a``, ``seed = 1000 + a``), checked bit for bit against the committed arm's rows
@@ -19,8 +20,8 @@ Each step resumes from its checkpoints (``runs/k48-given/``) within a session. W
 cover all 100 agents, ``stack`` writes them as the study's ``hard/given-options`` arm, and
 ``skillchain reproduce paper --out results/paper --report-only`` rewrites the report.
 
-    python results/paper/given_hard_slices.py run 8 28 &    # one core each; 15-20 agents a
-    python results/paper/given_hard_slices.py run 28 48 &   # slice (a 5-agent one is Python-bound)
+    python results/paper/given_hard_slices.py run 57 78 &    # one core each: ~22 agents
+    python results/paper/given_hard_slices.py run 78 100 &   # a slice finish in ~2 h
     python results/paper/given_hard_slices.py status
     python results/paper/given_hard_slices.py stack
 """
