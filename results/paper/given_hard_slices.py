@@ -21,7 +21,7 @@ cover all 100 agents, ``stack`` writes them as the study's ``hard/given-options`
 ``skillchain reproduce paper --out results/paper --report-only`` rewrites the report.
 
     python results/paper/given_hard_slices.py run 57 78 &    # one core each: ~22 agents
-    python results/paper/given_hard_slices.py run 78 100 &   # a slice finish in ~2 h
+    python results/paper/given_hard_slices.py run 78 100 &   # a slice finishes in ~2 h
     python results/paper/given_hard_slices.py status
     python results/paper/given_hard_slices.py stack
 """
