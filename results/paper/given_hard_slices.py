@@ -4,7 +4,7 @@ session: the study's own command cannot, because its options banks are not commi
 Why: the arm needs the 100 discoverers' option banks (``hard/skill-chaining/options.pt``,
 ~130 MB, not committed). The nineteenth session made the arm, but its work never landed (its CI
 machine ran out of disk), and the next session started on a fresh machine without the banks.
-A 12-agent slice costs ~325-355 core-seconds per agent, discoverers and given agents together
+A 12-13 agent slice costs ~250-360 core-seconds per agent, discoverers and given agents together
 (its slowest agent sets its wall time): about 9 core-hours for the arm, more than a session on 2
 cores. So each slice ``[a, b)`` of agents is made end to end:
 
@@ -89,9 +89,7 @@ def _copy_config(src: Path, dst: Path) -> None:
     """``src`` with its options bank named relative to the repository: the absolute path of
     the machine that made it means nothing on another (the bank itself is not committed)."""
     config = json.loads(src.read_text())
-    bank = Path(config["options"])
-    if bank.is_absolute() and bank.is_relative_to(ROOT):
-        config["options"] = str(bank.relative_to(ROOT))
+    config["options"] = str(_shown(Path(config["options"])))
     dst.write_text(json.dumps(config, indent=2) + "\n")
 
 
