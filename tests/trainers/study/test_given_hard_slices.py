@@ -1,6 +1,6 @@
 """The hard given-options arm's slice script (results/paper/given_hard_slices.py): the stack
 refuses gaps and overlaps, keeps the agents' order, and a slice's config names its bank
-relative to the repository."""
+relative to the repository; the table script (given_hard_table.py) pairs agents in order."""
 
 import importlib.util
 import json
@@ -11,6 +11,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[3]
 SCRIPT = ROOT / "results" / "paper" / "given_hard_slices.py"
+TABLE = ROOT / "results" / "paper" / "given_hard_table.py"
 
 
 @pytest.fixture()
@@ -61,3 +62,23 @@ def test_a_slice_config_names_its_bank_relative_to_the_repository(slices, tmp_pa
     src.write_text(json.dumps({"agent": "given-options", "options": str(bank)}))
     slices._copy_config(src, dst)
     assert json.loads(dst.read_text())["options"] == "runs/k48-given/sc-0-5/options.pt"
+
+
+def _table(tmp_path):
+    spec = importlib.util.spec_from_file_location("given_hard_table", TABLE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.HARD = tmp_path / "hard"
+    return module
+
+
+def test_the_table_reads_slices_in_order_and_stops_at_a_gap(slices, tmp_path):
+    table = _table(tmp_path)
+    slices.SLICES = table.HARD / "given-slices"
+    for a, b in [(5, 9), (0, 5), (12, 20)]:  # 9-12 missing: 12-19 would pair with the wrong seeds
+        _slice(slices, a, b)
+    assert np.array_equal(table.given_returns()[:, 0], np.arange(9))
+    arm = table.HARD / "given-options"
+    arm.mkdir(parents=True)
+    np.save(arm / "returns.npy", np.full((100, 3), 7.0))  # the stacked arm, once it exists
+    assert table.given_returns().shape == (100, 3)
