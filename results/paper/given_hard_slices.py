@@ -123,6 +123,7 @@ def run_slice(a: int, b: int) -> Path:
 
 
 def _slices() -> list[tuple[int, int]]:
+    """The finished slices' ``(a, b)``, in agent order."""
     spans = [tuple(int(x) for x in d.name.split("-")) for d in SLICES.glob("*-*")
              if (d / "run_info.json").is_file()]
     return sorted(spans)

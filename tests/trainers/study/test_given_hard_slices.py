@@ -64,21 +64,19 @@ def test_a_slice_config_names_its_bank_relative_to_the_repository(slices, tmp_pa
     assert json.loads(dst.read_text())["options"] == "runs/k48-given/sc-0-5/options.pt"
 
 
-def _table(tmp_path):
+def _table(slices_module):
     spec = importlib.util.spec_from_file_location("given_hard_table", TABLE)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    module.HARD = tmp_path / "hard"
+    module.slices = slices_module  # the table finds slices as the (patched) slice script does
     return module
 
 
-def test_the_table_reads_slices_in_order_and_stops_at_a_gap(slices, tmp_path):
-    table = _table(tmp_path)
-    slices.SLICES = table.HARD / "given-slices"
+def test_the_table_reads_slices_in_order_and_stops_at_a_gap(slices):
+    table = _table(slices)
     for a, b in [(5, 9), (0, 5), (12, 20)]:  # 9-12 missing: 12-19 would pair with the wrong seeds
         _slice(slices, a, b)
     assert np.array_equal(table.given_returns()[:, 0], np.arange(9))
-    arm = table.HARD / "given-options"
-    arm.mkdir(parents=True)
-    np.save(arm / "returns.npy", np.full((100, 3), 7.0))  # the stacked arm, once it exists
+    slices.ARM.mkdir(parents=True)
+    np.save(slices.ARM / "returns.npy", np.full((100, 3), 7.0))  # the stacked arm, once it exists
     assert table.given_returns().shape == (100, 3)
