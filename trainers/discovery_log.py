@@ -38,7 +38,7 @@ from collections import Counter
 import numpy as np
 import torch
 
-from skillchain_torch.discovery.executions import OUTCOMES
+from skillchain_torch.discovery.skill_chaining import OUTCOMES
 from skillchain_torch.options import OptionStatus
 
 from .timed import TimedHook

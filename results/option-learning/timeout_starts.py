@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skillchain_torch.discovery.step_rules import StepRules
+from skillchain_torch.discovery import SkillChaining
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
 HERE = Path(__file__).resolve().parent
@@ -32,7 +32,7 @@ def on_execution_end(row) -> None:
     """Wrap discovery's end-of-execution rule: ``row(rules, p, k, success, duration,
     terminated)`` for each agent ``p`` whose execution of slot ``k`` ends, before the rule runs
     (the slot's stored examples and ``rules.trace`` still as the execution left them)."""
-    finish = StepRules._finish_executions
+    finish = SkillChaining._finish_executions
 
     def recorded(self, option, reached, duration, ended, terminated):
         rows = (ended & (option >= 0)).nonzero()[:, 0]
@@ -42,7 +42,7 @@ def on_execution_end(row) -> None:
             row(self, p, int(slot[p]), int(hit[p]), int(duration[p]), int(terminated[p]))
         return finish(self, option, reached, duration, ended, terminated)
 
-    StepRules._finish_executions = recorded
+    SkillChaining._finish_executions = recorded
 
 
 def record_executions(records: list) -> None:

@@ -12,8 +12,8 @@ from skillchain_torch.agents.hierarchical import (
     MAX_OPTION_STEPS,
     NUM_PRIMITIVES,
     HierarchicalAgent,
+    SkillChainingAgent,
 )
-from skillchain_torch.agents.skill_chaining import SkillChainingAgent
 
 __all__ = [
     "FlatSarsaAgent",

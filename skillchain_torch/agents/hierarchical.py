@@ -1,6 +1,29 @@
-"""``HierarchicalAgent``: SMDP Sarsa over primitives and options, for a population of agents.
+"""The hierarchical agent and skill chaining, one step read top to bottom (sections 2, 4, 5.1).
 
-The agent of paper sections 2, 4 and 5.1 with a given set of options (no discovery here):
+This file is the algorithm. :class:`HierarchicalAgent` is SMDP Sarsa over primitives and a
+given set of options; :class:`SkillChainingAgent` is the same agent discovering its options.
+One step of either is one call, :meth:`HierarchicalAgent.transition` (which
+:meth:`SkillChainingAgent.transition` wraps with discovery's per-step record), and reads in
+the paper's order as plain calls into the pieces:
+
+======================================  =====================================  =======
+the step                                call                                   section
+======================================  =====================================  =======
+memberships: sets that hold s'          :meth:`membership` (the classifiers)   2, 4.3
+targets: the options' events at s'      :meth:`targets`                        4.2
+intra-option update of the options      ``option_update``                      2
+option stops: target, 250 steps, end    ``option_stops`` (:meth:`transition`)  2, 5.1
+the next decision at s'                 :meth:`_choose` (epsilon-greedy)       2
+SMDP update of the decision that ended  :meth:`learn` (:class:`SarsaUpdate`)   2
+the action: option policy or primitive  :meth:`_act`                           2
+discovery's per-step record             ``discovery.record``,                  4, 5.1
+                                        ``discovery.after_transition``
+======================================  =====================================  =======
+
+When episodes end, :meth:`SkillChainingAgent.episodes_ended` applies discovery's episode rules
+(learned sets become targets, gestation ends). The trainer drives the agent through the
+episode protocol at the end of the class (``begin``, ``observe``, ``observe_ends``,
+``compact``): compact rows of the active agents in, actions out.
 
 * **Top level.** Epsilon-greedy (``epsilon = 0.01``) over ``D = 5 + K`` decisions: the five
   primitive actions and every option slot ``k`` (decision ``5 + k``) that is executable and
@@ -21,12 +44,13 @@ Random numbers: each active agent draws 4 uniforms per step from its own
 action), and 4 more at a restart, whatever it decides; every operation is row-independent, so
 agent ``p`` of a population is bit-identical to the same agent alone.
 
-The per-step state (:class:`~.step_state.StepState`) is held for all P agents.
+The per-step state is declared once (:class:`~.step_state.StepState`, ``agent.step_state``);
+its fields read as the agent's attributes (``agent.obs is agent.step_state.obs``).
 
-Two paths compute a step (``native``): the torch path below, and a compiled one
-(:mod:`.compiled_step`, the default where every piece is the built-in one): the same decisions,
-sums in an order of its own. The top level's rules: :mod:`.top_level`; the trainer's protocol:
-:mod:`.episode_protocol`.
+Two paths compute the rest of a step after the memberships, targets and uniforms
+(``native``): the torch path in :meth:`HierarchicalAgent.transition`, and a compiled one
+(:func:`skillchain_torch.backends.hierarchical.transition`, the default where every piece is
+the built-in one): the same decisions, sums in an order of their own.
 
 Example:
     >>> from skillchain_torch.options import OptionBank
@@ -37,26 +61,37 @@ Example:
     >>> obs = torch.tensor([[0.2, 0.9, 0.5, 0.5]] * 2, dtype=torch.float64)
     >>> agent.begin(obs).shape
     torch.Size([2])
+    >>> sc = SkillChainingAgent.build(population=2, slots=4, order=1, seed=0)
+    >>> sc.bank.live().any().item()                 # no options until the goal is reached
+    False
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from operator import attrgetter
 
 import torch
+from tensordict import TensorDict
 from torch import Tensor, nn
 
-from skillchain_torch.agents.compiled_step import CompiledStep
-from skillchain_torch.agents.episode_protocol import EpisodeProtocol
-from skillchain_torch.agents.option_execution import (
-    FAILURE_BOOTSTRAPS,
-    INTRA_OPTION_TARGETS,
-    OptionExecution,
-)
-from skillchain_torch.agents.step_state import STEP_FIELDS, StepState, StepStateFields
-from skillchain_torch.agents.top_level import TopLevel, shared_fourier_columns
 from skillchain_torch.backends import hierarchical as backend
-from skillchain_torch.discovery.overlap import overlap_exclusion
+from skillchain_torch.backends.native import check_same_kernels
+from skillchain_torch.discovery import (
+    CONVERGENCE_EPISODES,
+    CONVERGENCE_THRESHOLD,
+    GESTATION_EPISODES,
+    MAX_BRANCHING,
+    InitiationReading,
+    SkillChaining,
+)
+from skillchain_torch.discovery.readings import FIRST_READING
+from skillchain_torch.discovery.skill_chaining import (
+    evaluate_base_events,
+    exclude_overlap,
+    overlap_exclusion,
+    target_indicator,
+)
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.objectives import (
@@ -66,16 +101,31 @@ from skillchain_torch.objectives import (
     discount,
     option_update_mask,
 )
+from skillchain_torch.objectives.option_replay import OptionReplay
 from skillchain_torch.options import (
+    FourierOptionQHead,
     GoalEvent,
     InitiationClassifier,
     OptionBank,
+    OptionStatus,
     TerminationPredicate,
+)
+from skillchain_torch.policies import epsilon_greedy
+from skillchain_torch.presets import (
+    PRESET_FIELDS,
+    Preset,
+    env_values,
+    instance_defaults,
+    instance_slots,
+    preset_named,
 )
 from skillchain_torch.rng import CounterRNG
 
-__all__ = ["HierarchicalAgent", "shared_fourier_columns", "NUM_PRIMITIVES", "MAX_OPTION_STEPS",
-           "UNIFORMS_PER_STEP", "FAILURE_BOOTSTRAPS", "INTRA_OPTION_TARGETS"]
+from .step_state import STEP_FIELDS, StepState
+
+__all__ = ["HierarchicalAgent", "SkillChainingAgent", "shared_fourier_columns", "NUM_PRIMITIVES",
+           "MAX_OPTION_STEPS", "UNIFORMS_PER_STEP", "FAILURE_BOOTSTRAPS", "INTRA_OPTION_TARGETS",
+           "END_OUTSIDE_SET"]
 
 NUM_PRIMITIVES = 5
 OBS_DIM = 4
@@ -90,8 +140,52 @@ def as_bool(x: Tensor) -> Tensor:
     return x if x.dtype == torch.bool else x.to(torch.bool)
 
 
-class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep,
-                        StepStateFields, nn.Module):
+FAILURE_BOOTSTRAPS = ("decision", "primitives")
+INTRA_OPTION_TARGETS = ("decisions", "primitives")
+# Which executions end where they leave their option's own set: none (the paper), those of
+# options whose sets are learned (OptionStatus.LEARNED), or every one.
+END_OUTSIDE_SET = {"off": None, "learned": OptionStatus.LEARNED, "always": OptionStatus.LEARNING}
+
+
+def shared_fourier_columns(basis: FourierBasis, q_head) -> Tensor | None:
+    """Where the option heads' Fourier features sit among ``basis``'s, or ``None``.
+
+    A :class:`~skillchain_torch.options.FourierOptionQHead` of order ``o <= basis.order`` over
+    the same observation has coefficient vectors ``c in {0..o}^4``, a subset of ``basis``'s,
+    and :class:`FourierBasis` computes each ``cos(pi c . s)`` the same way whatever the order
+    (``c . s`` summed over the dims in order from the same products ``s_j * c_j``, then an
+    elementwise cosine), so ``q_head.encode(s)`` equals ``basis(s)[:, columns]`` bit for bit.
+
+    Example:
+        >>> from skillchain_torch.options import FourierOptionQHead
+        >>> columns = shared_fourier_columns(FourierBasis(4, 4), FourierOptionQHead(1, 1, order=3))
+        >>> columns.shape, columns[:3].tolist()
+        (torch.Size([256]), [0, 1, 2])
+    """
+    inner = getattr(q_head, "basis", None)
+    if type(q_head) is not FourierOptionQHead:  # a subclass may encode its own way
+        return None
+    if (not isinstance(inner, FourierBasis) or inner.dim != basis.dim
+            or inner.order > basis.order or inner.coefficients.dtype != basis.coefficients.dtype
+            or inner.coefficients.device != basis.coefficients.device):  # fmt: skip
+        return None
+    radix = basis.order + 1
+    places = radix ** torch.arange(basis.dim - 1, -1, -1, device=inner.coefficients.device)
+    return (inner.coefficients.to(torch.int64) * places).sum(-1)
+
+
+def _field(name: str) -> property:
+    """``agent.<name>``: the field of ``agent.step_state`` (read through ``attrgetter``, which
+    runs in C: the torch path reads a dozen fields a step)."""
+
+    def write(agent, value: Tensor) -> None:
+        setattr(agent.step_state, name, value)
+
+    return property(attrgetter(f"step_state.{name}"), write,
+                    doc=f"``step_state.{name}`` (:class:`StepState`).")  # fmt: skip
+
+
+class HierarchicalAgent(nn.Module):
     """Population-batched SMDP Sarsa agent over primitive actions and the options of a bank.
 
     Args:
@@ -398,3 +492,608 @@ class HierarchicalAgent(TopLevel, OptionExecution, EpisodeProtocol, CompiledStep
                 f"({self.intra_option_target}), interruption={self.interruption}, end_outside_set="
                 f"{self.end_outside_set}, "
                 f"active={int(self._index.numel())}, native={self.native}")
+
+    # ==========================================================================================
+    # The top level: its choice among primitives and options, and how it learns (section 2)
+    # ==========================================================================================
+    def top_level_available(self, obs: Tensor, contains: Tensor | None = None) -> Tensor:
+        """``[P, 5 + K]``: the primitives (always) and the available options at ``obs``."""
+        options = self.bank.available(obs, contains)
+        primitives = torch.ones(self.population, self.num_primitives, dtype=torch.bool,
+                                device=options.device)
+        return torch.cat([primitives, options], dim=-1)
+
+    def _encode(self, obs: Tensor, index: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """``(phi(s), option code of s)``: the top-level features and the option heads' code
+        (of the rows ``index`` of ``obs [P, 4]`` only, when given: ``[len(index), .]``).
+
+        When the option heads use a Fourier basis of the same observation and no higher order
+        (the paper: order 3 under order 4), their features are columns of the top level's,
+        computed with the same arithmetic (see :func:`shared_fourier_columns`), so they are
+        picked rather than computed again."""
+        phi = self.features(obs if index is None else obs[index])
+        if self._code_columns is not None:
+            return phi, phi[:, self._code_columns]
+        code = self.bank.q_head.encode(obs)  # a head's code may need every row (its checks)
+        return phi, code if index is None else code[index]
+
+    def _choose(self, obs: Tensor, phi: Tensor, contains: Tensor, uniforms: Tensor,
+                rows: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
+        """Top-level epsilon-greedy decision at ``obs``; ``(phi, decision)``.
+
+        Only the agents in ``rows [P]`` (default all) need a decision: an executing option that
+        goes on needs none, and the 5 + K values are the top level's largest cost. Other rows'
+        decisions are meaningless. ``phi`` and ``Q(obs, .)`` stay in ``last_phi`` and
+        ``last_q`` for subclasses (``last_q`` valid on ``rows`` for the available decisions,
+        0 for the others). ``phi``: ``features(obs)``, from :meth:`_encode`."""
+        available = self.top_level_available(obs, contains)
+        rows = torch.ones_like(self.active) if rows is None else rows
+        if self.native:
+            q, decision = backend.choose(self.q_head.weight, phi, available, rows,
+                                         self.num_primitives, uniforms, self.epsilon)  # fmt: skip
+            self.last_phi, self.last_q, self.last_available = phi, q, available
+            return phi, decision
+        # Value only what can be chosen: the primitives, and the few options whose initiation
+        # set holds the state (each value is the same row sum as a full forward).
+        if self.closed_form:  # (a buffer: no graph; the hot path skips the context)
+            q = self.q_head.forward_mask(phi, available & rows[:, None], dense=self.num_primitives)
+        else:  # a head of the user's own: acting values are never differentiated
+            with torch.no_grad():
+                q = self.q_head.forward_mask(phi, available & rows[:, None],
+                                             dense=self.num_primitives)  # fmt: skip
+        self.last_phi, self.last_q, self.last_available = phi, q, available
+        return phi, epsilon_greedy(q, available, self.epsilon, uniforms,
+                                   check=False)  # primitives are always available
+
+    def learn(self, phi: Tensor, decision: Tensor, ret: Tensor, duration: Tensor,
+              next_value: Tensor, terminated: Tensor, active: Tensor,
+              **next_state: Tensor) -> Tensor:  # fmt: skip
+        """One SMDP Sarsa step of the top-level head toward ``ret + gamma^k next_value``
+        for the ``active`` agents; their TD errors ``[P]``. The built-in linear head steps in
+        closed form (:class:`SarsaUpdate`); any other by its loss and optimizer, or by the
+        agent's ``top_learner`` (which also reads ``next_state``: ``next_phi``,
+        ``next_decision``, ``next_available``, and ``stepped``: the agents still running)."""
+        if self.closed_form:
+            return self.update(self.q_head, phi, decision, ret, duration, phi, decision,
+                               terminated, active=active, next_value=next_value)
+        with torch.enable_grad():
+            return self._loss_step(phi, decision, ret, duration, next_value, terminated, active,
+                                   next_state)  # fmt: skip
+
+    def _loss_step(self, phi, decision, ret, duration, next_value, terminated, active,
+                   next_state=None) -> Tensor:  # fmt: skip
+        extra = next_state if self.top_learner is not None and next_state else {}
+        td = TensorDict(phi=phi, decision=decision, decision_return=ret, duration=duration,
+                        next_value=next_value, terminated=terminated, active=active, **extra,
+                        batch_size=[self.population])  # fmt: skip
+        if self.top_learner is not None:
+            return self.top_learner(td)
+        self.optimizer.zero_grad()
+        out = self.loss(td)
+        out["loss"].backward()
+        self.optimizer.step()
+        return out["td_error"]
+
+    # ==========================================================================================
+    # The options: memberships, targets, the executing option's action, and the readings of an
+    # ==========================================================================================
+    # execution the paper leaves open (interruption, what the primitives learn inside options)
+    def _set_readings(self, failure_bootstrap: str, intra_option_primitives: bool,
+                      intra_option_target: str, interruption: bool,
+                      end_outside_set: str) -> None:  # fmt: skip
+        """Check and keep the readings of an execution (HierarchicalAgent's arguments)."""
+        if failure_bootstrap not in FAILURE_BOOTSTRAPS:
+            raise ValueError(f"failure_bootstrap must be one of {', '.join(FAILURE_BOOTSTRAPS)}"
+                             f", got {failure_bootstrap!r}")  # fmt: skip
+        if intra_option_target not in INTRA_OPTION_TARGETS:
+            raise ValueError(f"intra_option_target must be one of "
+                             f"{', '.join(INTRA_OPTION_TARGETS)}, got {intra_option_target!r}")
+        if end_outside_set not in END_OUTSIDE_SET:
+            raise ValueError(f"end_outside_set must be one of {', '.join(END_OUTSIDE_SET)}, "
+                             f"got {end_outside_set!r}")  # fmt: skip
+        self.failure_bootstrap = failure_bootstrap
+        self.intra_option_primitives = bool(intra_option_primitives)
+        self.intra_option_target = intra_option_target
+        self.interruption, self.end_outside_set = bool(interruption), end_outside_set
+        self.leave_from = END_OUTSIDE_SET[end_outside_set]
+
+    def membership(self, obs: Tensor) -> Tensor:
+        """``[P, K]``: which initiation sets hold ``obs [P, 4]`` for *choosing* an option (one
+        classifier evaluation per visited state). The classifiers' own sets are kept as
+        ``_raw_contains``: the targets of chained options, and where options learn."""
+        self._raw_contains = self.bank.classifier.contains(obs)
+        return self.narrow(self._raw_contains)
+
+    def narrow(self, contains: Tensor) -> Tensor:
+        """The sets an option may be chosen in, from the classifiers' own ``contains [P, K]``
+        (skill chaining: its no-overlap rule, section 4.3)."""
+        if self._exclusion is None:
+            return contains
+        return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
+
+    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
+        """``[P, K]``: each live option's termination predicate (target event) at ``s'``.
+
+        A chained option's target is its parent's own initiation set (the classifier's, as in
+        discovery), not the parent's set narrowed by the no-overlap rule."""
+        raw = contains if self._exclusion is None else self._raw_contains
+        bank = self.bank
+        # OptionBank.target_reached's answer from the events' values (compiled where built):
+        # this runs every step, and target_reached costs ~140 us of small torch ops.
+        if bank.slots and int(bank.target_event.max()) >= len(self.events):
+            used = int(bank.target_event.max())
+            raise ValueError(f"target event {used} used by a slot, but only {len(self.events)} "
+                             f"given")  # fmt: skip
+        return target_indicator(bank, evaluate_base_events(self.events, next_obs, terminated),
+                                raw)  # fmt: skip
+
+    def _best_decision(self) -> Tensor:
+        """``[P]``: ``max_d Q(s', d)`` over the decisions available at ``s'`` (``last_q``)."""
+        return self.last_q.masked_fill(~self.last_available, -torch.inf).max(1).values
+
+    def _best_primitive(self) -> Tensor:
+        """``[P]``: ``max_a Q(s', a)`` over the primitives at ``s'`` (``last_q``)."""
+        return self.last_q[:, :self.num_primitives].max(1).values
+
+    def _interrupted(self, going_on: Tensor, phi_next: Tensor) -> Tensor:
+        """``[P]``: the executions in ``going_on`` that stop at ``s'`` because the option in
+        force is no longer the greedy decision there (``Q(s', o) < max_d Q(s', d)``;
+        ``interruption``, Sutton, Precup & Singh 1999, section 5)."""
+        in_force = self.decision[:, None]
+        q_o = self.last_q.gather(1, in_force)[:, 0]  # valued where available at s'
+        gone = (going_on & ~self.last_available.gather(1, in_force)[:, 0]).nonzero()[:, 0]
+        if gone.numel() > 0:  # s' left the option's set: value it there
+            q_o = q_o.index_put((gone,), self.q_head.q_value(phi_next, self.decision, gone))
+        return going_on & (q_o < self._best_decision())
+
+    def _leaves(self, own_next: Tensor) -> Tensor | bool:
+        """``[P]``: executions whose ``s'`` lies outside their option's own initiation set
+        (``own_next [P, K]``), which end there under ``end_outside_set`` (``"learned"``: only
+        options whose sets are learned; ``"off"``: none, ``False``)."""
+        if self.leave_from is None:
+            return False
+        slot = self.option.clamp(min=0)[:, None]
+        status = self.bank.status.gather(1, slot)[:, 0]
+        return (self.option >= 0) & (status >= self.leave_from) & ~own_next.gather(1, slot)[:, 0]
+
+    def _learn_inside(self, reward: Tensor, terminated: Tensor, inside: Tensor,
+                      stepped: Tensor, phi_next: Tensor) -> None:  # fmt: skip
+        """``intra_option_primitives``: the primitive an option took at ``s`` moves toward
+        ``r + max Q(s', .)`` (one Q-learning step; over every available decision, or the
+        primitives only with ``intra_option_target="primitives"``); ``state_phi`` moves on."""
+        best = (self._best_primitive() if self.intra_option_target == "primitives"
+                else self._best_decision())  # fmt: skip
+        self.learn(self.state_phi, self.action, reward, torch.ones_like(self.duration), best,
+                   terminated, inside)
+        self.state_phi = torch.where(stepped[:, None], phi_next, self.state_phi)
+
+    def _act(self, rows: Tensor, uniforms: Tensor) -> None:
+        """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's
+        epsilon-greedy action by its Q-head at the current state."""
+        if self.native:
+            self.action = backend.act(self.bank.q_head.weight, self.option_code, rows,
+                                      self.decision, self.option, uniforms, self.option_epsilon,
+                                      self.action.clone())  # fmt: skip
+            return
+        action = self.decision.clamp(max=self.num_primitives - 1)
+        executing = rows & (self.option >= 0)
+        index = executing.nonzero()[:, 0]
+        if index.numel() > 0:  # only the executing rows' option values (a row's own sums)
+            q_opt = self.bank.q_head.slot_values_rows(self.option_code, self.option, index)
+            all_actions = torch.ones_like(q_opt, dtype=torch.bool)
+            by_option = epsilon_greedy(q_opt, all_actions, self.option_epsilon, uniforms[index],
+                                       check=False)  # fmt: skip
+            action = action.index_put((index,), by_option)
+        self.action = torch.where(rows, action, self.action)
+
+    # ==========================================================================================
+    # The compiled step (native): what it hands the backend, and what it keeps
+    # ==========================================================================================
+    def step_rules(self) -> backend.StepRules:
+        """The settings the compiled step follows, as the agent holds them now."""
+        return backend.StepRules(
+            epsilon=self.epsilon, option_epsilon=self.option_epsilon, gamma=self.gamma,
+            max_option_steps=self.max_option_steps, option_alpha=self.bank.q_head.alpha,
+            completion_reward=float(self.option_update.completion_reward),
+            failure_bootstrap_primitives=self.failure_bootstrap == "primitives",
+            intra_option_primitives=self.intra_option_primitives,
+            intra_option_primitive_target=self.intra_option_target == "primitives",
+            interruption=self.interruption, leave_from=self.leave_from)  # fmt: skip
+
+    def _encode_next(self, next_obs: Tensor) -> tuple[Tensor, Tensor | None, Tensor | None]:
+        """``(phi(s'), the option heads' code of s' or None, the columns of phi it is picked
+        from or None)``: where the code's features are among the top level's
+        (:func:`~skillchain_torch.agents.top_level.shared_fourier_columns`), the step picks
+        them itself instead of a second basis."""
+        phi = self.features(next_obs)
+        columns = self._code_columns
+        return phi, self.bank.q_head.encode(next_obs) if columns is None else None, columns
+
+    def _compiled_transition(self, at_next: backend.AtNext) -> dict[str, Tensor]:
+        """The rest of :meth:`transition` after the memberships, targets and uniforms of
+        ``s'``, in one compiled pass; the same monitoring dict."""
+        learned = backend.Learned(self.q_head.weight, self.bank.q_head.weight,
+                                  self.update.step_size, self.bank.status)  # fmt: skip
+        before = self.step_state
+        self.step_state, out = backend.transition(before, learned, at_next, self.step_rules(),
+                                                  want_value=self.WANTS_VALUE)  # fmt: skip
+        self.last_phi, self.last_q, self.last_value = at_next.phi, out.q, out.value
+        self._options_starting(out.started)
+        return {"decision_ended": out.decision_ended, "duration": out.duration,
+                "decision_return": out.decision_return, "option_delta": out.option_delta,
+                "smdp_delta": out.smdp_delta, "decision": before.decision,
+                "option": before.option, "reached": at_next.reached}  # fmt: skip
+
+    # ==========================================================================================
+    # The episode protocol every agent of a trainer follows (rows = active agents, ascending id)
+    # ==========================================================================================
+    def all_active(self) -> bool:
+        """Every agent is active: rows are agents (a check without a call into torch)."""
+        return self._index.numel() == self.population
+
+    def all_stepped(self, stepped: Tensor) -> bool:
+        """``stepped`` is the agent's own ``active`` mask with every agent active (what
+        :meth:`observe` passes): per-row masking by it changes nothing, so it can be skipped."""
+        return stepped is self.active and self.all_active()
+
+    # ------------------------------------------------------------------ protocol
+    def _full(self, rows_value: Tensor, fill: Tensor) -> Tensor:
+        if self.all_active():  # rows are agents
+            return rows_value if rows_value.dtype == fill.dtype else rows_value.to(fill.dtype)
+        out = fill.clone()
+        out[self._index] = rows_value if rows_value.dtype == out.dtype else rows_value.to(out.dtype)
+        return out
+
+    def begin(self, obs: Tensor) -> Tensor:
+        """First decisions of every active agent at its start observation ``[n, 4]``."""
+        self._start_decisions(self._full(obs, self.obs), self.active.clone())
+        return self.actions
+
+    def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
+        """Learn from a step in which no episode ended; the next actions ``[n]``."""
+        none = torch.zeros_like(self.active)
+        self.transition(self._full(obs, self.obs), self._full(reward, self.decision_return),
+                        none, none, self.active)
+        return self.actions
+
+    def observe_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
+                     restart_rows: Tensor, start_obs: Tensor | None) -> Tensor:
+        """Like :meth:`observe` when some episodes ended (see ``FlatSarsaAgent``): terminal
+        updates do not bootstrap, truncated ones do; rows in ``restart_rows`` then decide at
+        ``start_obs``."""
+        none = torch.zeros_like(self.active)
+        terminated, truncated = self._full(terminated, none), self._full(truncated, none)
+        self.transition(self._full(obs, self.obs), self._full(reward, self.decision_return),
+                        terminated, truncated, self.active)
+        self.episodes_ended(self.active & (terminated | truncated))
+        if restart_rows.numel() > 0:
+            restart = torch.zeros_like(self.active)
+            restart[self._index[restart_rows]] = True
+            start = self.obs.clone()
+            start[self._index[restart_rows]] = start_obs.to(start.dtype)
+            self._start_decisions(start, restart)
+        return self.actions
+
+    def episodes_ended(self, rows: Tensor) -> None:
+        """Agents ``rows [P]`` just ended an episode (before any restart); nothing to do here,
+        skill chaining runs its per-episode rules."""
+
+    def compact(self, keep: Tensor) -> None:
+        """Keep the active rows where ``keep [n]``; the others stop for good."""
+        self._index = self._index[keep]
+        active = torch.zeros_like(self.active)
+        active[self._index] = True
+        self.active = active
+
+    @property
+    def index(self) -> Tensor:
+        """Ids of the active agents, ascending ``[n]``."""
+        return self._index
+
+    @property
+    def actions(self) -> Tensor:
+        """The primitive action of each active row ``[n]``."""
+        if self.all_active():  # (action is replaced, never written)
+            return self.action
+        return self.action[self._index]
+
+    @property
+    def decisions(self) -> Tensor:
+        """The top-level decision in force for each active row ``[n]`` (5 + k: option k)."""
+        return self.decision[self._index]
+
+    @property
+    def options(self) -> Tensor:
+        """The executing option slot of each active row ``[n]`` (-1: none)."""
+        return self.option[self._index]
+
+    def flush(self) -> None:
+        """Nothing to write back: the state is held for all agents."""
+
+    # ------------------------------------------------------------------ state
+    _EPISODE = ("obs", "contains", "own_contains", "decision", "option", "decision_return",
+                "duration", "active")
+
+    def state_dict(self, *args, **kwargs):
+        """Top-level weights, options, streams, and every agent's episode state.
+
+        Laid out like ``FlatSarsaAgent``'s (``q_head``, ``rng``, ``index``, ``action``,
+        ``phi``: the features of the state where the decision in force was taken), plus
+        ``bank`` and ``episode`` (the per-agent option state).
+        """
+        return {
+            "q_head": self.q_head.state_dict(),
+            "rng": self.rng.state_dict(),
+            "index": self._index.clone(),
+            "action": self.action.clone(),
+            "phi": self.decision_phi.clone(),
+            "bank": self.bank.state_dict(),
+            "episode": {name: getattr(self, name).clone() for name in self._EPISODE},
+            "native": self.native,
+            **({} if self.optimizer is None else {"optimizer": self.optimizer.state_dict()}),
+            **({"top_learner": self.top_learner.state_dict()}
+               if hasattr(getattr(self, "top_learner", None), "state_dict") else {}),
+            **({"option_replay": self.bank.q_head.replay.state_dict()}
+               if getattr(self.bank.q_head, "replay", None) is not None else {}),
+        }
+
+    def load_state_dict(self, state, strict: bool = True, assign: bool = False):
+        device = self.obs.device
+        check_same_kernels(state, self.native)
+        self.q_head.load_state_dict(state["q_head"])
+        if self.optimizer is not None and "optimizer" in state:
+            self.optimizer.load_state_dict(state["optimizer"])
+        if "top_learner" in state:
+            self.top_learner.load_state_dict(state["top_learner"])
+        if "option_replay" in state:
+            replay = self.bank.q_head.replay  # (the built-in one moves to the bank's device)
+            if isinstance(replay, OptionReplay):
+                replay.load_state_dict(state["option_replay"], device=self.bank.status.device)
+            else:
+                replay.load_state_dict(state["option_replay"])
+        self.bank.load_state_dict(state["bank"])
+        self.rng.load_state_dict(state["rng"])
+        self.rng.to(device)
+        self._index = state["index"].to(device)
+        self.action = state["action"].to(device).clone()
+        self.decision_phi = state["phi"].to(device).clone()
+        episode = state["episode"]
+        if "own_contains" not in episode:  # saved before the own sets were kept (issue 30):
+            episode = {**episode, "own_contains": episode["contains"]}  # what it learned by
+        for name in self._EPISODE:
+            setattr(self, name, episode[name].to(device).clone())
+        phi, self.option_code = self._encode(self.obs)  # pure functions of s
+        if self.intra_option_primitives:
+            self.state_phi = phi
+
+
+# Every StepState field reads and writes as the agent's attribute (agent.obs is
+# agent.step_state.obs), so the torch path reads as the paper's rules.
+for _name in STEP_FIELDS:
+    setattr(HierarchicalAgent, _name, _field(_name))
+
+
+class SkillChainingAgent(HierarchicalAgent):
+    """Population-batched skill chaining: P agents, K option slots each, discovered on-line.
+
+    Args:
+        bank: an :class:`OptionBank` (usually empty; :meth:`build` makes a preset's).
+        events: the base target events, goal first (section 4.4).
+        gestation, max_branching, convergence_threshold, convergence_episodes, overlap,
+            wait_for_both_classes: the discovery rules (paper: 10, 3, 0.15, 2, on, off); see
+            :class:`~skillchain_torch.discovery.SkillChaining`. The constructor's defaults are
+            the paper's discovery rules; :meth:`build` takes every value from a preset.
+        reading: the initiation-set reading (:class:`~skillchain_torch.discovery.
+            InitiationReading`; default the first one, true everywhere until the first fit).
+        policy_start: ``"zero"``, ``"top-level"`` or ``"top-level-shifted"``: how a joining
+            option's policy starts
+            (see :class:`~skillchain_torch.discovery.SkillChaining`).
+        **kwargs: the :class:`HierarchicalAgent` arguments (``order``, ``alpha``, ``gamma``,
+            ``epsilon``, ``seed``, ``option_epsilon``, ``max_option_steps``, ...).
+
+    Attributes:
+        discovery: the :class:`SkillChaining` state; its ``log`` holds the discovery events.
+    """
+
+    _PLAIN = HierarchicalAgent._PLAIN | {"q_decision", "_starts"}
+    WANTS_VALUE = True  # gestation samples Q(s, d) of the decision in force
+
+    def __init__(self, bank: OptionBank, events: Sequence[TerminationPredicate] = (GoalEvent(),),
+                 gestation: int = GESTATION_EPISODES, max_branching: int = MAX_BRANCHING,
+                 convergence_threshold: float = CONVERGENCE_THRESHOLD,
+                 convergence_episodes: int = CONVERGENCE_EPISODES, overlap: bool = True,
+                 wait_for_both_classes: bool = False,
+                 reading: InitiationReading = FIRST_READING, policy_start: str = "zero",
+                 value_start: str = "max-sample", value_bonus: float = 0.0,
+                 **kwargs):  # fmt: skip
+        super().__init__(bank, events=events, **kwargs)
+        # Two starts read the linear head's weights and the Fourier basis directly.
+        uses = [f"value_start={value_start!r}"] * (value_start == "agent") + \
+            [f"policy_start={policy_start!r}"] * (policy_start != "zero")
+        if uses and not (self.closed_form and type(self.features) is FourierBasis):
+            raise ValueError(f"{' and '.join(uses)} fit the built-in LinearQHead over a "
+                             f"FourierBasis, not {type(self.q_head).__name__} over "
+                             f"{type(self.features).__name__}: use value_start='max-sample' "
+                             "and policy_start='zero' (the paper's) with your own head")
+        self.discovery = SkillChaining(
+            self.bank, self.events, gestation=gestation, max_branching=max_branching,
+            convergence_threshold=convergence_threshold,
+            convergence_episodes=convergence_episodes,
+            max_option_steps=kwargs.get("max_option_steps", MAX_OPTION_STEPS), overlap=overlap,
+            wait_for_both_classes=wait_for_both_classes, reading=reading,
+            policy_start=policy_start, value_start=value_start, value_bonus=value_bonus,
+            top_basis=self.features, completion_reward=self.option_update.completion_reward,
+        )  # fmt: skip
+        # Q(s, d) of the decision d in force at the current state s, valued when s was reached
+        # (before that step's update): the samples of gestation.
+        self.q_decision = torch.zeros(self.population, dtype=torch.float64,
+                                      device=self.obs.device)  # fmt: skip
+        self._starts: Tensor | None = None  # agents whose option started this step, if any
+
+    @classmethod
+    def build(cls, population: int, preset: str | Preset = "default", seed: int | Tensor = 0,
+              device: torch.device | str | None = None, map: str | None = None,
+              **kwargs) -> SkillChainingAgent:  # fmt: skip
+        """The agent of a named preset, with an empty bank of Fourier options per agent.
+
+        Args:
+            population: P, the number of independent agents.
+            preset: ``"default"`` (the library's, which ``skillchain train`` builds) or
+                ``"paper"`` (section 5.1's values); see :mod:`skillchain_torch.presets`.
+            seed: agent p's random streams are keyed by ``seed + p``.
+            map: the Pinball map whose paper ``order`` / ``alpha`` and library ``slots`` apply
+                where the preset leaves them to the instance (``None``: the first instance's, 4,
+                0.001 and 12 slots; the hard instance has 48).
+            **kwargs: any :class:`~skillchain_torch.presets.Preset` field (``slots``,
+                ``gestation``, ``option_alpha``, ``balanced``, ...) overrides the preset's
+                value; ``top_head``, ``option_head``, ``initiation`` name the pieces
+                (:mod:`~skillchain_torch.agents.pieces`: the paper's ``"fourier"``,
+                ``"fourier"``, ``"logistic"`` by default, or ``"mlp"``); ``top_learner`` (a dict)
+                goes to the top-level piece's builder (``"mlp"``: ``lr``, ``target_update``,
+                ``bootstrap``); the rest go to the
+                constructor (``events``, ``native``, ``reading``, ...) and win over the preset.
+
+        Example:
+            >>> paper = SkillChainingAgent.build(2, preset="paper", order=1, gestation=5)
+            >>> paper.discovery.gestation, paper.discovery.policy_start
+            (5, 'zero')
+            >>> SkillChainingAgent.build(2, order=1).discovery.policy_start  # "default"
+            'top-level'
+        """
+        bank, arguments = cls.build_arguments(population, preset, seed=seed, device=device,
+                                              map=map, **kwargs)  # fmt: skip
+        return cls(bank, **arguments)
+
+    @staticmethod
+    def build_arguments(population: int, preset: str | Preset = "default",
+                        seed: int | Tensor = 0, device: torch.device | str | None = None,
+                        map: str | None = None, **kwargs) -> tuple[OptionBank, dict]:  # fmt: skip
+        """``(bank, constructor keyword arguments)`` of :meth:`build` (the trainer's
+        ``SkillChainingRunAgent`` builds through this too, so both build the same agent)."""
+        from .pieces import assemble_bank, top_level_arguments  # (they import the modules)
+
+        fields = {k: kwargs.pop(k) for k in list(kwargs) if k in PRESET_FIELDS}
+        names = {k: kwargs.pop(k, d) for k, d in (("top_head", "fourier"),
+                                                  ("option_head", "fourier"),
+                                                  ("initiation", "logistic"))}  # fmt: skip
+        learner = kwargs.pop("top_learner", None)
+        # The env's sizes (its specs; None: Pinball's 4 and 5).
+        sizes = {k: v for k in ("obs_dim", "num_actions") if (v := kwargs.pop(k, None)) is not None}
+        p = preset_named(preset).replace(**fields)
+        order, alpha = instance_defaults(map)
+        if p.slots is None:  # the library's for the map (off Pinball, map None: 12)
+            p = p.replace(slots=instance_slots(map))
+        if "obs_dim" in sizes:  # off Pinball: from the env's size, as TrainConfig.resolved
+            order, alpha, scaled = env_values(p, sizes["obs_dim"], p.order)
+            if "option_alpha" not in fields:
+                p = p.replace(option_alpha=scaled)
+        bank = OptionBank.build(population, p.slots, order=p.option_order, alpha=p.option_alpha,
+                                seed=seed, device=device, degree=p.degree, lr=p.lr,
+                                sweeps=p.sweeps, capacity=p.capacity, distance=p.distance,
+                                balanced=p.balanced, keep_negatives=p.keep_negatives,
+                                store_failures=p.store_failures,
+                                constrain_nearest=p.constrain_nearest,
+                                initial_bias=p.initiation_bias,
+                                centered=p.initiation_centered, **sizes)  # fmt: skip
+        bank = assemble_bank(bank, names["option_head"], names["initiation"], seed=seed)
+        top = top_level_arguments(names["top_head"], population, bank.obs_dim,
+                                  bank.num_actions + p.slots, p.gamma, seed, device,
+                                  learner)  # fmt: skip
+        reading = InitiationReading(p.gestation_positives, p.initiation_start,
+                                    p.initiation_constrain, p.one_class_fits)  # fmt: skip
+        arguments = dict(
+            order=order if p.order is None else p.order,
+            alpha=alpha if p.alpha is None else p.alpha, gamma=p.gamma, epsilon=p.epsilon,
+            seed=seed, device=device, scale_step_size=p.scale_step_size,
+            failure_bootstrap=p.failure_bootstrap, completion_reward=p.completion_reward,
+            intra_option_primitives=p.intra_option_primitives,
+            intra_option_target=p.intra_option_target,
+            interruption=p.option_interruption, end_outside_set=p.end_outside_set,
+            option_epsilon=p.option_epsilon,
+            max_option_steps=p.max_option_steps, gestation=p.gestation,
+            max_branching=p.max_branching, convergence_threshold=p.convergence_threshold,
+            convergence_episodes=p.convergence_episodes, overlap=p.overlap, reading=reading,
+            policy_start=p.policy_start, value_start=p.value_start, value_bonus=p.value_bonus,
+        )  # fmt: skip
+        return bank, {**arguments, **top, **kwargs}
+
+    # ------------------------------------------------------------------ hooks
+    def narrow(self, contains: Tensor) -> Tensor:
+        return self.discovery.membership(contains)
+
+    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
+        # Targets are the classifiers' own sets at s' (kept by membership), not the effective
+        # ones in ``contains`` (see SkillChaining.membership).
+        return self.discovery.targets(next_obs, terminated, self.discovery.last_raw)
+
+    def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
+        super()._start_decisions(obs, rows)
+        self.discovery.start_episodes(self.obs, rows)
+        chosen = self.last_q.gather(1, self.decision[:, None])[:, 0]
+        self.q_decision = torch.where(rows, chosen, self.q_decision)
+        self._begin_executions()
+
+    def _options_starting(self, rows: Tensor) -> None:
+        # Snapshots wait until the step's updates (and any dropped ones) are done.
+        self._starts = rows if self._starts is None else self._starts | rows
+
+    def _begin_executions(self) -> None:
+        # (The compiled step reports its starts every step; most steps start none.)
+        if self._starts is not None and bool(self._starts.any()):
+            self.discovery.start_executions(self._starts, self.option)
+        self._starts = None
+
+    def transition(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
+                   truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:  # fmt: skip
+        contains, option, value = self.contains, self.option, self.q_decision
+        every = self.all_stepped(stepped)  # masks by stepped are then skipped
+        executing = option >= 0
+        self.discovery.record_states(stepped, self.obs)
+        self.discovery.record(executing if every else stepped & executing, self.duration,
+                              self.obs)  # fmt: skip
+        info = super().transition(next_obs, reward, terminated, truncated, stepped)
+        terminated = as_bool(terminated)
+        created = self.discovery.after_transition(
+            contains=contains, option=option, value=value,
+            reached=info["reached"], duration=info["duration"],
+            decision_ended=info["decision_ended"],
+            terminated=terminated if every else terminated & stepped, stepped=stepped,
+        )  # fmt: skip
+        if bool(created.any()):  # the new slot changes the memberships at s'
+            self.contains = torch.where(created[:, None], self.membership(self.obs),
+                                        self.contains)  # fmt: skip
+            self.own_contains = torch.where(created[:, None], self._raw_contains,
+                                            self.own_contains)  # fmt: skip
+            self.discovery.created_rows_evaluated(created)
+        # New decisions were valued before this step's update; an agent going on with its
+        # option had no update this step, so its value now is the value then.
+        if self.native:  # the compiled transition valued them (the same rule)
+            value_next = self.last_value
+        else:
+            value_next = self.last_q.gather(1, self.decision[:, None])[:, 0]
+            going_on = (stepped & ~info["decision_ended"]).nonzero()[:, 0]
+            if going_on.numel() > 0:
+                value_next[going_on] = self.q_head.q_value(self.last_phi, self.decision,
+                                                           going_on)  # fmt: skip
+        self.q_decision = value_next if every else torch.where(stepped, value_next,
+                                                                 self.q_decision)  # fmt: skip
+        self._begin_executions()
+        return info
+
+    def episodes_ended(self, rows: Tensor) -> None:
+        self.discovery.end_episodes(rows, self.q_head)
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self, *args, **kwargs):
+        state = super().state_dict()
+        state["discovery"] = self.discovery.state_dict()
+        state["q_decision"] = self.q_decision.clone()
+        return state
+
+    def load_state_dict(self, state, strict: bool = True, assign: bool = False):
+        super().load_state_dict(state)
+        self.discovery.load_state_dict(state["discovery"])
+        self.q_decision = state["q_decision"].to(self.obs.device).clone()
+
+    def extra_repr(self) -> str:
+        return super().extra_repr() + f", discovery={self.discovery!r}"

@@ -6,8 +6,8 @@
 ``s``. :class:`~skillchain_torch.agents.HierarchicalAgent` owns one (``agent.step_state``):
 its torch path reads and replaces the fields, and its compiled path hands the whole state to
 :func:`skillchain_torch.backends.hierarchical.transition`, which returns the state at ``s'``.
-Through :class:`StepStateFields` each field also reads and writes as the agent's attribute
-(``agent.obs is agent.step_state.obs``), so the torch path reads as the paper's rules.
+Each field also reads and writes as the agent's attribute (``agent.obs is
+agent.step_state.obs``), so the torch path reads as the paper's rules.
 
 Fields are replaced, never written in place, by the torch path; the compiled path writes
 ``option_code``, ``decision_phi`` and ``state_phi`` in place (each row is read before it is
@@ -23,12 +23,11 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from operator import attrgetter
 
 import torch
 from torch import Tensor
 
-__all__ = ["STEP_FIELDS", "StepState", "StepStateFields"]
+__all__ = ["STEP_FIELDS", "StepState"]
 
 
 @dataclass(slots=True)
@@ -73,23 +72,4 @@ class StepState:
         )  # fmt: skip
 
 
-def _field(name: str) -> property:
-    """``agent.<name>``: the field of ``agent.step_state`` (read through ``attrgetter``, which
-    runs in C: the torch path reads a dozen fields a step)."""
-
-    def write(agent, value: Tensor) -> None:
-        setattr(agent.step_state, name, value)
-
-    return property(attrgetter(f"step_state.{name}"), write,
-                    doc=f"``step_state.{name}`` (:class:`StepState`).")  # fmt: skip
-
-
 STEP_FIELDS = tuple(field.name for field in fields(StepState))
-
-
-class StepStateFields:
-    """Mixin: every :class:`StepState` field of the agent's ``step_state`` as an attribute."""
-
-
-for _name in STEP_FIELDS:
-    setattr(StepStateFields, _name, _field(_name))

@@ -57,7 +57,7 @@ OBS_DIM = 4
 
 class Stores(NamedTuple):
     """A classifier's example stores as the kernels read and write them (in place): the
-    buffers of :class:`~skillchain_torch.options.example_store.ExampleStores` (``stores``)."""
+    buffers of :class:`~skillchain_torch.options.InitiationClassifier` (``stores``)."""
 
     examples: Tensor  #: ``[P, K, C, 4]`` float64
     labels: Tensor  #: ``[P, K, C]`` bool

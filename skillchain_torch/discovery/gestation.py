@@ -44,13 +44,12 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.backends import discovery as backend
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.invariant import rowwise_dot
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import OptionBank, OptionStatus
 
-__all__ = ["GESTATION_EPISODES", "POLICY_STARTS", "VALUE_STARTS", "RecentStates", "StateValueFit",
+__all__ = ["GESTATION_EPISODES", "POLICY_STARTS", "VALUE_STARTS", "StateValueFit",
            "cached_projection", "gestation_over", "initialise_option_policies",
            "initialise_option_values", "state_value_fit", "value_projection"]
 
@@ -95,65 +94,6 @@ def initialise_option_values(q_head: LinearQHead, mask: Tensor, value: Tensor,
                       torch.cat([value.new_zeros(primitives.shape), value], dim=1))
 
 
-class RecentStates:
-    """The last ``length`` states of every agent's current episode, for gestation positives.
-
-    Deep skill chaining (Bagaria & Konidaris) makes a new option's initiation set local from
-    the start: during gestation, each time the option's target fires, the states that led to it
-    become positive examples. :meth:`record` keeps a ring of the states each agent acted in
-    this episode; :meth:`window` reads the last ``n`` of them, oldest first.
-
-    Example:
-        >>> import torch
-        >>> recent = RecentStates(population=2, length=3)
-        >>> for t in range(4):
-        ...     recent.record(torch.tensor([True, t < 1]), torch.full((2, 4), float(t)))
-        >>> agents, obs = recent.window(torch.tensor([True, True]), 3)
-        >>> agents.tolist(), obs[:, 0].tolist()           # agent 0: t = 1..3; agent 1: t = 0
-        ([0, 0, 0, 1], [1.0, 2.0, 3.0, 0.0])
-    """
-
-    def __init__(self, population: int, length: int, dtype=torch.float64, device=None,
-                 obs_dim: int = 4):  # fmt: skip
-        if length < 1:
-            raise ValueError(f"RecentStates needs length >= 1, got {length}")
-        self.length = int(length)
-        self.states = torch.zeros(population, self.length, obs_dim, dtype=dtype, device=device)
-        self.steps = torch.zeros(population, dtype=torch.int64, device=device)  # this episode
-
-    def record(self, rows: Tensor, obs: Tensor) -> None:
-        """Agents in ``rows [P]`` act in ``obs [P, 4]`` (the state a transition starts from)."""
-        if backend.NATIVE and backend.record_ring(self.states, self.steps, rows, obs):
-            return  # the same writes, compiled (this runs every step)
-        index = rows.nonzero()[:, 0]
-        if index.numel() == 0:
-            return
-        self.states[index, self.steps[index] % self.length] = obs[index].to(self.states.dtype)
-        self.steps[index] += 1
-
-    def start_episodes(self, rows: Tensor) -> None:
-        """Agents in ``rows [P]`` start an episode: their earlier states no longer count."""
-        self.steps = torch.where(rows, torch.zeros_like(self.steps), self.steps)
-
-    def window(self, rows: Tensor, n: int) -> tuple[Tensor, Tensor]:
-        """``(agents [M], obs [M, 4])``: the last ``min(n, length, steps)`` states of each agent
-        in ``rows [P]``, oldest first, agents in ascending order."""
-        n = min(int(n), self.length)
-        index = rows.nonzero()[:, 0]
-        taken = self.steps[index].clamp(max=n)  # [A]
-        back = torch.arange(n, 0, -1, device=self.steps.device)  # n .. 1 steps back
-        keep = back[None, :] <= taken[:, None]  # [A, n]
-        place = (self.steps[index, None] - back[None, :]) % self.length
-        agent = index[:, None].expand(-1, n)
-        return agent[keep], self.states[agent[keep], place[keep]]
-
-    def state_dict(self) -> dict:
-        return {"states": self.states.clone(), "steps": self.steps.clone()}
-
-    def load_state_dict(self, state: dict) -> None:
-        device = self.steps.device
-        self.states = state["states"].to(device).clone()
-        self.steps = state["steps"].to(device).clone()
 
 
 def observation_box(dim: int) -> tuple[tuple[float, ...], tuple[float, ...]]:

@@ -1,32 +1,36 @@
-"""``SkillChaining``: the discovery rules of paper sections 4 and 5.1 for a population.
+"""``SkillChaining``: the discovery rules of paper sections 4 and 5.1 for a population, in one file.
 
-One object holds the discovery state of P agents and applies the rules, each a named piece of
-this package with the paper's value as default:
+One object holds the discovery state of P agents and applies the rules, in the order the agent
+calls them. Each rule is a named method or function of this file with the paper's value as
+its default; only what runs when an episode ends and is long stays in its own module.
 
 =========================  ==================================================  ==============
-rule                       piece                                               paper value
+rule                       where                                               paper value
 =========================  ==================================================  ==============
-target events              :mod:`.events` (base events, learned sets)          goal
-creation, covered start    :mod:`.creation`                                    -
-gestation, Q(s, o) init    :mod:`.gestation`                                   10 episodes
-initiation-set examples,   :mod:`.executions`                                  250 steps
-dropped failed updates
+target events              :func:`targeting`, :func:`event_list`,              goal
+                           :func:`target_indicator`, :func:`entered`
+no overlap                 :func:`overlap_exclusion`, :func:`exclude_overlap`  siblings, parent
+initiation-set examples,   :class:`ExecutionTrace`,                            250 steps
+dropped failed updates     :meth:`SkillChaining._finish_executions`
+creation, covered start    :meth:`SkillChaining._create`, :func:`covered_start`  -
+branching limit            :func:`event_list`                                  3
+slots full                 :meth:`SkillChaining._log_slots_full`               logged once
+gestation, Q(s, o) init    :meth:`SkillChaining.end_episodes`, :mod:`.gestation`  10 episodes
 learned (convergence)      :mod:`.convergence`                                 0.15, twice
 chaining + distance        :meth:`SkillChaining.end_episodes`                  0.1
 constraint
-no overlap                 :mod:`.overlap`                                     siblings, parent
-branching limit            :func:`.events.event_list`                          3
-slots full                 :meth:`SkillChaining.after_transition`              logged once
 =========================  ==================================================  ==============
 
-The agent (:class:`~skillchain_torch.agents.SkillChainingAgent`) calls it at four points:
-:meth:`membership` / :meth:`targets` while it evaluates a state, :meth:`record` before each
-transition, :meth:`after_transition` after its updates, and :meth:`end_episodes` when
-episodes end. Every operation is row-wise (no reduction across agents), so agent p's options
-are created, learned and chained identically alone or in a population.
+The agent (:class:`~skillchain_torch.agents.SkillChainingAgent`) calls it at four points, and
+they read here in that order: :meth:`~SkillChaining.membership` / :meth:`~SkillChaining.targets`
+while it evaluates a state, :meth:`~SkillChaining.record` before each transition,
+:meth:`~SkillChaining.after_transition` after its updates (executions that ended, gestation
+samples, creation), and :meth:`~SkillChaining.end_episodes` when episodes end (learned sets
+become targets, gestation ends). Every operation is row-wise (no reduction across agents), so
+agent p's options are created, learned and chained identically alone or in a population.
 
 Discovery events (``created``, ``joined``, ``learned``, ``slots_full``) are appended to
-:attr:`log` as :class:`DiscoveryEvent` for loggers to drain.
+:attr:`~SkillChaining.log` as :class:`DiscoveryEvent` for loggers to drain.
 
 Example:
     >>> import torch
@@ -39,6 +43,7 @@ Example:
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -46,32 +51,48 @@ import torch
 from torch import Tensor
 
 from skillchain_torch.backends import discovery as backend
+from skillchain_torch.backends import initiation as initiation_backend
+from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import (
     GoalEvent,
     InitiationClassifier,
     OptionBank,
+    OptionQHead,
     OptionStatus,
     TerminationPredicate,
 )
 from skillchain_torch.options.initiation_fit import check_fittable
+from skillchain_torch.options.status import slot_mask
 
 from .convergence import CONVERGENCE_EPISODES, CONVERGENCE_THRESHOLD, ConvergenceTest
-from .episode_rules import EpisodeRules
-from .events import MAX_BRANCHING, entered, evaluate_base_events, target_indicator
-from .executions import ExecutionCounts, ExecutionTrace
 from .gestation import (
     GESTATION_EPISODES,
     POLICY_STARTS,
     VALUE_STARTS,
-    RecentStates,
+    cached_projection,
+    gestation_over,
+    initialise_option_policies,
+    initialise_option_values,
+    state_value_fit,
 )
-from .overlap import exclude_overlap, overlap_exclusion
 from .readings import FIRST_READING, InitiationReading
-from .step_rules import StepRules
+from .value_scale import shift_option_values, target_levels
 
-__all__ = ["SkillChaining", "DiscoveryEvent"]
+__all__ = ["SkillChaining", "DiscoveryEvent", "MAX_BRANCHING", "OUTCOMES", "targeting",
+           "event_list", "evaluate_base_events", "target_indicator", "entered",
+           "overlap_exclusion", "exclude_overlap", "covered_start", "choose_creation",
+           "execution_outcome", "ExecutionTrace", "ExecutionCounts", "RecentStates"]
+
+logger = logging.getLogger("skillchain_torch.discovery")
 
 MAX_OPTION_STEPS = 250
+
+MAX_BRANCHING = 3  # paper 5.1: "a maximum branching factor of 3"
+# How an execution ends, as counted per agent-episode (ExecutionCounts, the run's
+# option_outcomes.npy): its target fired; it ran max_steps; the episode terminated elsewhere.
+# (An execution cut by a truncated episode is neither success nor failure: its steps count,
+# its outcome does not.)
+OUTCOMES = ("success", "timeout", "episode_end")
 
 
 @dataclass(frozen=True)
@@ -92,7 +113,7 @@ class DiscoveryEvent:
     value: float = float("nan")
 
 
-class SkillChaining(StepRules, EpisodeRules):
+class SkillChaining:
     """Skill-chaining discovery for a population of agents sharing an :class:`OptionBank`.
 
     Args:
@@ -378,3 +399,666 @@ class SkillChaining(StepRules, EpisodeRules):
                 f"convergence={self.convergence.threshold}x{self.convergence.episodes}, "
                 f"max_option_steps={self.max_option_steps}, overlap={self.overlap}, "
                 f"reading={self.reading.name}, policy_start={self.policy_start!r})")
+
+    # ------------------------------------------------------------------ per-step rules
+    def _gestation_hits(self, raw_now: Tensor, reached: Tensor, stepped: Tensor) -> Tensor:
+        """``[P, K]``: gestating options whose target was entered by this transition."""
+        gestating = self.bank.status == OptionStatus.GESTATING
+        hit = reached & gestating
+        if not bool(hit.any()):  # the usual step: no target of a gestating option at s'
+            return hit
+        before = target_indicator(self.bank, self.base_now, raw_now)
+        return entered(before, reached) & gestating & stepped[:, None]
+
+    def _gestation_positives(self, hits: Tensor) -> None:
+        """The last ``reading.gestation_positives`` states of each agent's trajectory become
+        positive examples of the slots in ``hits [P, K]`` (their target just fired)."""
+        if not bool(hits.any()):
+            return
+        classifier, n = self.bank.classifier, self.reading.gestation_positives
+        for p, k in hits.nonzero().tolist():
+            rows = torch.zeros_like(self.episode, dtype=torch.bool)
+            rows[p] = True
+            agents, obs = self.recent.window(rows, n)
+            labels = torch.ones_like(agents, dtype=torch.bool)
+            classifier.add_examples(agents, k, obs, labels)
+
+    def _finish_executions(self, option: Tensor, reached: Tensor, duration: Tensor,
+                           ended: Tensor, terminated: Tensor) -> None:  # fmt: skip
+        """Examples, refits and dropped updates of the executions that ended."""
+        if backend.NATIVE and backend.applies(option, reached):  # the same outcomes, compiled
+            slot, success, failure, any_ended, any_failure = backend.outcomes(
+                option, reached, duration, ended, terminated, self.max_option_steps,
+                self._outcomes_out)  # fmt: skip
+            if not any_ended:
+                return
+        else:
+            ended = ended & (option >= 0)
+            if not bool(ended.any()):
+                return
+            slot = option.clamp(min=0)
+            hit = reached.gather(1, slot[:, None])[:, 0]
+            success, failure = execution_outcome(hit, duration, terminated,
+                                                 self.max_option_steps)  # fmt: skip
+            success, failure = success & ended, failure & ended
+            any_failure = bool(failure.any())
+        timeout = failure & (duration >= self.max_option_steps)
+        self.counts.add(ended & (option >= 0), slot, success, timeout, failure & ~timeout,
+                        duration)  # fmt: skip
+        classifier = self.bank.classifier
+        touched = self.trace.store_examples(classifier, slot, duration, success, failure)
+        # Paper: 100 sweeps per new data point. Logistic regression on failures alone says
+        # "no" everywhere (the features are non-negative), so an option whose first executions
+        # all fail leaves the repertoire; wait_for_both_classes keeps such a set "true
+        # everywhere" until it has seen a success and a failure instead.
+        fit = touched & classifier.has_both_classes() if self.wait_for_both_classes else touched
+        if bool(fit.any()):
+            classifier.fit(fit)
+            self.fitted |= fit
+        if any_failure:
+            self.trace.drop_updates(slot, failure)
+
+    def _create(self, base_trig: Tensor, slot_trig: Tensor, contains: Tensor, option: Tensor,
+                sample: Tensor) -> Tensor:  # fmt: skip
+        bank = self.bank
+        base_on, slot_on = event_list(bank, len(self.events), self.max_branching)
+        # An agent whose slots are full creates nothing; once its first blocked creation is
+        # logged its triggers need no more work. (Late in a run every agent is full, and some
+        # agent enters a learned option's set at nearly every step.)
+        full = bank.full()
+        open_ = (~(full & self.slots_full_logged))[:, None]
+        base_trig, slot_trig = base_trig & base_on & open_, slot_trig & slot_on & open_
+        if not (bool(base_trig.any()) or bool(slot_trig.any())):  # nothing can be created
+            return torch.zeros(bank.population, dtype=torch.bool, device=base_trig.device)
+        base_cov, slot_cov = covered_start(bank, len(self.events), contains, option)
+        create, target_event, parent = choose_creation(base_trig, slot_trig, base_cov, slot_cov)
+        if not bool(create.any()):
+            return create
+        self._log_slots_full(create & full)
+        create = create & ~full
+        if not bool(create.any()):
+            return create
+        slot = bank.allocate(create, target_event=target_event, parent=parent,
+                             episode=self.episode)  # fmt: skip
+        new = slot_mask(create, slot, bank.slots)
+        self.gestation_q = torch.where(new, sample[:, None], self.gestation_q)
+        self.convergence.reset(new)
+        self.fitted &= ~new
+        self.episode_weights = torch.where(new[..., None], bank.classifier.snapshot(),
+                                           self.episode_weights)  # fmt: skip
+        self._exclusion = None
+        if self.recent is not None:  # the creating hit is the first of gestation
+            self._gestation_positives(new)
+        for p in create.nonzero()[:, 0].tolist():
+            k = int(slot[p])
+            self._emit("created", p, k, target=self.target_name(p, k))
+        return create
+
+    def _log_slots_full(self, blocked: Tensor) -> None:
+        first = blocked & ~self.slots_full_logged
+        if not bool(first.any()):
+            return
+        self.slots_full_logged |= first
+        for p in first.nonzero()[:, 0].tolist():
+            self._emit("slots_full", p, -1)
+            logger.info("agent %d: all %d option slots are used; it creates no more options",
+                        p, self.bank.slots)
+
+    # ------------------------------------------------------------------ episode-end rules
+    def end_episodes(self, rows: Tensor, q_head: LinearQHead) -> None:
+        """Agents ``rows [P]`` ended an episode: convergence and chaining, end of gestation."""
+        bank, classifier = self.bank, self.bank.classifier
+        learning = bank.status == OptionStatus.LEARNING
+        counted = rows[:, None] & learning & self.fitted
+        if bool(counted.any()):
+            change = classifier.weight_change(self.episode_weights)
+            converged = self.convergence.update(change, counted)
+            learned = converged & classifier.stored_classes()[0]  # needs a positive example
+            if bool(learned.any()):
+                bank.set_status(learned, OptionStatus.LEARNED)
+                classifier.constrain(learned)  # distance 0.1 from a positive example
+                for p, k in learned.nonzero().tolist():
+                    self._emit("learned", p, k, target=self.target_name(p, k))
+        join = gestation_over(bank, self.episode, rows, self.gestation)
+        if bool(join.any()):
+            self._start_sets(join)
+            value = torch.nan_to_num(self.gestation_q, neginf=0.0)
+            bank.set_status(join, OptionStatus.LEARNING)
+            initialise_option_values(q_head, join, value, q_head.num_decisions - bank.slots)
+            if self.value_start == "agent":
+                self._agent_values(q_head, join)
+            if self.policy_start != "zero":  # a copy of the top level's primitive values
+                if self._projection is None:  # once per run: a fixed grid, no random numbers
+                    self._projection = cached_projection(self.top_basis, bank.q_head.basis)
+                initialise_option_policies(bank.q_head, q_head, join, self._projection,
+                                           bank.num_actions)  # fmt: skip
+            if self.policy_start == "top-level-shifted":  # ... on the option's own scale
+                level = target_levels(bank, q_head, self.top_basis, join)
+                shift_option_values(bank.q_head, join, self.completion_reward - level)
+            for p, k in join.nonzero().tolist():
+                self._emit("joined", p, k, target=self.target_name(p, k),
+                           value=float(value[p, k]))  # fmt: skip
+        self.counts.end_episodes(rows)
+        self.episode = self.episode + rows.to(torch.int64)
+        self.episode_weights = torch.where(rows[:, None, None], classifier.snapshot(),
+                                           self.episode_weights)  # fmt: skip
+        self.fitted = self.fitted & ~rows[:, None]
+
+    @torch.no_grad()
+    def _agent_values(self, q_head: LinearQHead, join: Tensor) -> None:
+        """``Q(s, o) = max_a Q(s, a) + value_bonus`` (fitted) for the options in ``join``."""
+        if self._value_fit is None:  # once per run: a fixed grid, no random numbers
+            self._value_fit = state_value_fit(self.top_basis)
+        primitives = q_head.weight.shape[1] - self.bank.slots
+        for p, k in join.nonzero().tolist():
+            w = self._value_fit(q_head.weight[p, :primitives])
+            w[0] += self.value_bonus
+            q_head.weight[p, primitives + k] = w.to(q_head.weight.dtype)
+
+    def _start_sets(self, join: Tensor) -> None:
+        """The initiation sets of the options in ``join [P, K]`` as gestation ends, by the
+        reading: fitted on their gestation positives (``start="fitted"``), and under the
+        distance constraint from now on (``constrain="start"``)."""
+        classifier = self.bank.classifier
+        if self.reading.start == "fitted":
+            positive, negative = classifier.stored_classes()
+            fit = join & positive & (negative | self.reading.one_class_fits)
+            if bool(fit.any()):
+                classifier.fit(fit)
+        if self.reading.constrain == "start":
+            classifier.constrain(join)
+
+
+# ----------------------------------------------------------------------------------------------
+# Target events (sections 4.2-4.4)
+# ----------------------------------------------------------------------------------------------
+#
+# An agent's target events are the *base* events, shared by all agents and indexed ``0..E-1``
+# (the end-of-episode goal first, then any indicator the user adds, e.g. a novelty event), and
+# the initiation sets of its LEARNED options (slot ``j``: the chaining step). An event leaves the
+# list once ``max_branching`` options target it (section 4.3); a learned set joins it.
+#
+# Which option targets what is read from the :class:`~skillchain_torch.options.OptionBank`:
+# slot ``k`` with ``parent[k] = j >= 0`` targets slot j's initiation set; with ``parent[k] < 0``
+# it targets base event ``target_event[k]``. Everything here is a pure function of the bank's
+# ``[P, K]`` metadata and elementwise, so agent p's answers never depend on the other agents.
+
+
+def targeting(bank: OptionBank, num_base: int) -> tuple[Tensor, Tensor]:
+    """Which live option targets which event.
+
+    Returns:
+        ``base [P, K, E]``: slot k targets base event e; ``slot [P, K, K]``: slot k targets
+        slot j's initiation set (``[p, k, j]``, i.e. j is k's parent in the skill tree).
+
+    Example:
+        >>> import torch
+        >>> from skillchain_torch.options import OptionBank, OptionStatus
+        >>> bank = OptionBank.build(population=1, slots=4, order=1, capacity=8)
+        >>> _ = bank.allocate(torch.tensor([True]), target_event=0)      # slot 0 -> goal
+        >>> _ = bank.allocate(torch.tensor([True]), parent=0)            # slot 1 -> I(slot 0)
+        >>> base, slot = targeting(bank, num_base=1)
+        >>> base.sum(1).tolist(), slot.sum(1).tolist()                   # options per event
+        ([[1]], [[1, 0, 0, 0]])
+        >>> bank.set_status(torch.tensor([[True, False, False, False]]), OptionStatus.LEARNED)
+        >>> [t.tolist() for t in event_list(bank, num_base=1)]           # goal, I(slot 0) listed
+        [[[True]], [[True, False, False, False]]]
+    """
+    live = bank.live()
+    chained = bank.parent >= 0
+    events = torch.arange(num_base, device=live.device)
+    base = (live & ~chained)[..., None] & (bank.target_event[..., None] == events)
+    slots = torch.arange(bank.slots, device=live.device)
+    slot = (live & chained)[..., None] & (bank.parent[..., None] == slots)
+    return base, slot
+
+
+def event_list(bank: OptionBank, num_base: int,
+               max_branching: int = MAX_BRANCHING) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """The target events on each agent's list: ``(base [P, E], slot [P, K])``.
+
+    A base event is listed until ``max_branching`` options target it; slot j's initiation set
+    is listed once the option is LEARNED, until ``max_branching`` options target it.
+    """
+    if backend.NATIVE and backend.applies(bank.status):
+        return backend.event_list(bank.parent, bank.target_event, bank.status,
+                                           num_base, max_branching)  # fmt: skip
+    base, slot = targeting(bank, num_base)
+    base_on = base.sum(1) < max_branching
+    slot_on = (bank.status == OptionStatus.LEARNED) & (slot.sum(1) < max_branching)
+    return base_on, slot_on
+
+
+def evaluate_base_events(events: Sequence[TerminationPredicate], obs: Tensor,
+                         terminated: Tensor) -> Tensor:  # fmt: skip
+    """``BoolTensor [P, E]``: every base event's indicator at ``obs [P, 4]``."""
+    if not events:
+        return torch.zeros(obs.shape[0], 0, dtype=torch.bool, device=obs.device)
+    if len(events) == 1:  # the paper's goal alone, every step: a view, not a stack
+        fired = events[0](obs, terminated)
+        return (fired if fired.device == obs.device else fired.to(obs.device)).unsqueeze(-1)
+    return torch.stack([e(obs, terminated).to(obs.device) for e in events], dim=-1)
+
+
+def target_indicator(bank: OptionBank, base_fired: Tensor, contains: Tensor) -> Tensor:
+    """``[P, K]``: each live slot's target event at a state, from the base events' values
+    ``base_fired [P, E]`` and the initiation-set memberships ``contains [P, K]`` there.
+
+    The same answer as :meth:`OptionBank.target_reached`, without evaluating any event again.
+    """
+    if backend.NATIVE and backend.applies(contains, bank.status):
+        return backend.target_indicator(bank.parent, bank.target_event, bank.status,
+                                                 base_fired, contains)  # fmt: skip
+    chained = bank.parent >= 0
+    from_parent = contains.gather(1, bank.parent.clamp(min=0))
+    if base_fired.shape[1] == 0:
+        from_base = torch.zeros_like(from_parent)
+    else:
+        index = bank.target_event.clamp(min=0, max=base_fired.shape[1] - 1)
+        from_base = base_fired.gather(1, index) & (bank.target_event >= 0)
+    return torch.where(chained, from_parent, from_base) & bank.live()
+
+
+def entered(before: Tensor, after: Tensor) -> Tensor:
+    """An event is *triggered* by a transition that enters it: false at ``s``, true at ``s'``.
+
+    For the goal (only ever true at the last state) this is the event itself; for an
+    initiation set it is the first step inside it, not every step spent there.
+    """
+    return after & ~before
+
+
+# ----------------------------------------------------------------------------------------------
+# Creation (sections 4.1, 4.3): a triggered target event spawns an option, unless covered
+# ----------------------------------------------------------------------------------------------
+#
+# When a transition ``s -> s'`` triggers (enters) a target event on the agent's list, the agent
+# creates an option whose termination condition is that event, *unless* ``s`` already lies in
+# the initiation set of an option targeting that event (the covered-start exception). An
+# executing option that reaches its own target does not count as uncovered either: it was
+# started inside its initiation set, and reaching the target is its success, not a new event.
+#
+# At most one option is created per agent and step; when several listed events fire at once
+# the first base event wins (the goal before user events), then the lowest slot.
+
+
+def covered_start(bank: OptionBank, num_base: int, contains: Tensor,
+                  executing: Tensor) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """Events whose trigger at this transition is *covered*: ``(base [P, E], slot [P, K])``.
+
+    Args:
+        bank: the options (their targets).
+        num_base: E, the number of base events.
+        contains: ``[P, K]`` initiation-set membership of ``s``, the state the trigger came
+            from (computed for action selection at ``s``: no classifier runs again).
+        executing: ``LongTensor [P]`` the option executing during the transition, -1 none.
+    """
+    base, slot = targeting(bank, num_base)  # [P, K, E], [P, K, K]
+    base_cov = (base & contains[..., None]).any(1)
+    slot_cov = (slot & contains[..., None]).any(1)
+    # The executing option's own target: its start state was in its initiation set.
+    agents = torch.arange(bank.population, device=contains.device)
+    running = (executing >= 0)[:, None]
+    k = executing.clamp(min=0)
+    base_cov = base_cov | (running & base[agents, k])
+    slot_cov = slot_cov | (running & slot[agents, k])
+    return base_cov, slot_cov
+
+
+def choose_creation(base_trig: Tensor, slot_trig: Tensor, base_cov: Tensor,
+                    slot_cov: Tensor) -> tuple[Tensor, Tensor, Tensor]:  # fmt: skip
+    """Which agents create an option now, and what it targets.
+
+    Args:
+        base_trig, slot_trig: ``[P, E]`` / ``[P, K]`` listed events triggered by this
+            transition (on the list *and* entered).
+        base_cov, slot_cov: the covered events of :func:`covered_start`.
+
+    Returns:
+        ``(create [P], target_event [P], parent [P])``: the new option targets base event
+        ``target_event`` (``parent = -1``) or slot ``parent``'s initiation set
+        (``target_event = -1``).
+
+    Example:
+        >>> import torch
+        >>> base_trig = torch.tensor([[True], [True], [False]])   # the goal fired for 0 and 1
+        >>> slot_trig = torch.zeros(3, 2, dtype=torch.bool)
+        >>> covered = (torch.tensor([[False], [True], [False]]),
+        ...            torch.zeros(3, 2, dtype=torch.bool))
+        >>> create, event, parent = choose_creation(base_trig, slot_trig, *covered)
+        >>> create.tolist(), event.tolist(), parent.tolist()
+        ([True, False, False], [0, -1, -1], [-1, -1, -1])
+    """
+    candidates = torch.cat([base_trig & ~base_cov, slot_trig & ~slot_cov], dim=-1)
+    create = candidates.any(-1)
+    first = candidates.to(torch.int64).argmax(-1)
+    num_base = base_trig.shape[1]
+    none = torch.full_like(first, -1)
+    target_event = torch.where(create & (first < num_base), first, none)
+    parent = torch.where(create & (first >= num_base), first - num_base, none)
+    return create, target_event, parent
+
+
+# ----------------------------------------------------------------------------------------------
+# No overlap (section 4.3)
+# ----------------------------------------------------------------------------------------------
+#
+# "We require that the initiation set of an option does not overlap that of its siblings or
+# parents." Applied where membership is decided, from the classifier outputs already computed for
+# action selection (the paper's remark: at most one run of each classifier per visited state):
+# option k's effective initiation set is its classifier's set minus the sets of
+#
+# * its parent, the option whose initiation set k targets, and
+# * its *older* siblings, the options created earlier to target the same event.
+#
+# Older siblings keep what they hold and a younger one gets the rest, so two siblings never
+# exclude each other's shared region from both. Only trained classifiers exclude: an untrained
+# one is "true everywhere" and would empty its relatives. In discovery slots fill in order and
+# are never freed, so the lower slot of two siblings is the older.
+
+
+def overlap_exclusion(bank: OptionBank) -> Tensor:
+    """``BoolTensor [P, K, K]``: ``[p, k, j]`` when option k must stay out of j's set
+    (j is k's parent, or an older sibling: same target, lower slot)."""
+    live = bank.live()
+    K = bank.slots
+    slots = torch.arange(K, device=live.device)
+    parent = bank.parent[..., None] == slots  # [P, K, K]: j is k's parent
+    chained = bank.parent >= 0
+    same_parent = chained[..., None] & (bank.parent[..., None] == bank.parent[:, None, :])
+    same_event = (~chained & (bank.target_event >= 0))[..., None] & (~chained)[:, None, :] & (
+        bank.target_event[..., None] == bank.target_event[:, None, :]
+    )
+    older = slots[None, :] < slots[:, None]  # [k, j]: j < k
+    sibling = (same_parent | same_event) & older
+    both_live = live[..., None] & live[:, None, :]
+    return (parent | sibling) & both_live
+
+
+def exclude_overlap(contains: Tensor, exclusion: Tensor, trained: Tensor) -> Tensor:
+    """The effective memberships ``[P, K]``: ``contains`` minus the trained sets each option
+    must avoid (``exclusion`` from :func:`overlap_exclusion`).
+
+    Example:
+        >>> import torch
+        >>> from skillchain_torch.options import OptionBank
+        >>> bank = OptionBank.build(population=1, slots=3, order=1, capacity=8)
+        >>> for _ in range(2):
+        ...     _ = bank.allocate(torch.tensor([True]), target_event=0)   # two goal options
+        >>> bank.classifier.trained[:] = True
+        >>> raw = torch.tensor([[True, True, True]])
+        >>> exclude_overlap(raw, overlap_exclusion(bank), bank.classifier.trained).tolist()
+        [[True, False, True]]
+    """
+    if backend.NATIVE and backend.applies(contains, exclusion):
+        return backend.exclude_overlap(contains, exclusion, trained)
+    blocking = contains & trained  # [P, J]
+    excluded = (exclusion & blocking[:, None, :]).any(-1)
+    return contains & ~excluded
+
+
+# ----------------------------------------------------------------------------------------------
+# Executions (sections 4.1, 5.1): initiation-set examples, dropped updates of failures
+# ----------------------------------------------------------------------------------------------
+#
+# "When the agent executed the option, states on trajectories that reached its goal within 250
+# steps were used as positive examples, and the start states of trajectories that did not were
+# used as negative examples." And: "updates from unsuccessful on-policy trajectories" were
+# ignored, "because their start states were then removed from the initiation set".
+#
+# :class:`ExecutionTrace` follows the execution in progress of every agent: the states it acted
+# in (at most ``max_steps``) and a copy of the option's Q-head slot taken when it started. When
+# the execution ends:
+#
+# * *success*, the option's target event fired at ``s'``: every state it acted in is a
+#   positive example;
+# * *failure*, it ran ``max_steps`` steps, or the episode terminated elsewhere than at its
+#   target: its start state is a negative example, and the option's Q-head slot is put back as
+#   it was at the start, dropping the updates of the failed trajectory;
+# * neither, when an episode *truncation* (a step limit of the environment, not of the option)
+#   cut it short: it was not given its 250 steps, so it teaches nothing either way.
+
+
+OBS_DIM = 4
+
+def execution_outcome(reached: Tensor, duration: Tensor, terminated: Tensor,
+                      max_steps: int) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """``(success, failure)`` of executions that just ended (all ``[P]``).
+
+    Args:
+        reached: the executing option's target fired at ``s'``.
+        duration: steps the execution ran, this one included.
+        terminated: the episode terminated at ``s'``.
+        max_steps: the option's step limit (paper: 250).
+
+    Example:
+        >>> import torch
+        >>> success, failure = execution_outcome(
+        ...     reached=torch.tensor([True, False, False, False]),
+        ...     duration=torch.tensor([3, 250, 7, 7]),
+        ...     terminated=torch.tensor([False, False, True, False]), max_steps=250)
+        >>> success.tolist(), failure.tolist()     # target, timeout, episode over, truncated
+        ([True, False, False, False], [False, True, True, False])
+    """
+    success = reached
+    failure = ~reached & ((duration >= max_steps) | terminated)
+    return success, failure
+
+
+class ExecutionTrace:
+    """The states of every agent's execution in progress, and its option's starting weights.
+
+    Args:
+        population: P; max_steps: the longest execution (paper: 250).
+        q_head: the options' :class:`~skillchain_torch.options.OptionQHead` (for the snapshot).
+
+    State (:meth:`state_dict`): ``states [P, max_steps, D]`` and ``snapshot`` (the Q-head
+    slot of the executing option at its start, per agent).
+    """
+
+    def __init__(self, population: int, max_steps: int, q_head: OptionQHead,
+                 dtype=torch.float64, device=None):  # fmt: skip
+        self.max_steps = int(max_steps)
+        self.q_head = q_head
+        self.states = torch.zeros(population, self.max_steps, q_head.obs_dim, dtype=dtype,
+                                  device=device)  # fmt: skip
+        slot = torch.zeros(population, dtype=torch.int64, device=device)
+        self.snapshot = q_head.read_slots(slot)
+        self._agents = torch.arange(population, device=device)
+
+    def start(self, rows: Tensor, slot: Tensor) -> None:
+        """Agents in ``rows [P]`` start executing option ``slot [P]``: keep its weights."""
+        tensors = self.q_head.slot_tensors()
+        if all(backend.copy_slots(value, rows, slot, self.snapshot[name], False)
+               for name, value in tensors.items()):  # fmt: skip
+            return  # one compiled copy per tensor
+        index = rows.nonzero()[:, 0]
+        if index.numel() == 0:
+            return
+        # Copy just the starting agents' slots (a few rows of [P, ...] weights).
+        k = slot[index].clamp(min=0)
+        for name, value in tensors.items():
+            self.snapshot[name][index] = value[index, k].to(self.snapshot[name].dtype)
+
+    def record(self, rows: Tensor, step: Tensor, obs: Tensor) -> None:
+        """Agents in ``rows [P]`` act in ``obs [P, 4]`` as step ``step [P]`` (0-based)."""
+        if (self.states.dtype == torch.float64 and self.states.shape[-1] == OBS_DIM
+                and backend.NATIVE and backend.applies(self.states, rows)):  # fmt: skip
+            backend.record(self.states, rows, step, obs)
+            return
+        index = rows.nonzero()[:, 0]
+        self.states[index, step[index].clamp(max=self.max_steps - 1)] = obs[index].to(
+            self.states.dtype)
+
+    def examples(self, slot: Tensor, duration: Tensor, success: Tensor,
+                 failure: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:  # fmt: skip
+        """Initiation-set examples of ended executions, in agent order.
+
+        Returns ``(agents [N], slots [N], obs [N, 4], labels [N])``: the ``duration`` states
+        of each successful execution (positive), the start state of each failed one (negative).
+        """
+        steps = torch.arange(self.max_steps, device=slot.device)
+        positive = success[:, None] & (steps < duration[:, None])
+        negative = failure[:, None] & (steps == 0)
+        take = positive | negative  # [P, T]
+        agents, step = take.nonzero().unbind(-1)
+        return agents, slot[agents], self.states[agents, step], positive[agents, step]
+
+    def store_examples(self, classifier: InitiationClassifier, slot: Tensor, duration: Tensor,
+                       success: Tensor, failure: Tensor) -> Tensor:  # fmt: skip
+        """Add the :meth:`examples` of ended executions to ``classifier`` (slot ``slot [P]``
+        of each agent); the ``[P, K]`` mask of slots that received data.
+
+        A compiled classifier stores them straight from the trace (the same examples in the
+        same order, so the same stores)."""
+        if (classifier.native and self.states.dtype == torch.float64
+                and self.states.shape[-1] == OBS_DIM):  # fmt: skip
+            touched = torch.zeros(classifier.population, classifier.slots, dtype=torch.bool)
+            initiation_backend.store_executions(classifier.stores, self.states, slot, duration,
+                                                success, failure, touched)  # fmt: skip
+            classifier.dirty |= touched
+            return touched
+        agents, slots, obs, labels = self.examples(slot, duration, success, failure)
+        if agents.numel() == 0:
+            return torch.zeros_like(classifier.dirty)
+        return classifier.add_examples(agents, slots, obs, labels)
+
+    def drop_updates(self, slot: Tensor, failure: Tensor) -> None:
+        """Put the options of failed executions back as they were when they started."""
+        tensors = self.q_head.slot_tensors()
+        if all(backend.copy_slots(value, failure, slot, self.snapshot[name], True)
+               for name, value in tensors.items()):  # fmt: skip
+            return
+        self.q_head.write_slots(slot, self.snapshot, failure)
+
+    def state_dict(self) -> dict:
+        return {"states": self.states.clone(),
+                "snapshot": {k: v.clone() for k, v in self.snapshot.items()}}
+
+    def load_state_dict(self, state: dict) -> None:
+        device = self.states.device
+        self.states = state["states"].to(device).clone()
+        self.snapshot = {k: v.to(device).clone() for k, v in state["snapshot"].items()}
+
+
+class ExecutionCounts:
+    """How each agent's option executions ended this episode, per slot: ``outcomes [P, K, 3]``
+    (:data:`OUTCOMES`) and ``steps [P, K]`` (their durations). At an agent's episode end they
+    become its ``last_outcomes`` / ``last_steps`` (what the trainer's monitors read) and start
+    again. Kept by discovery, where executions end anyway, so monitoring needs no per-step work.
+
+    Example:
+        >>> counts = ExecutionCounts(population=2, slots=2)
+        >>> counts.add(torch.tensor([True, False]), torch.tensor([1, 0]),
+        ...            torch.tensor([True, False]), torch.tensor([False, False]),
+        ...            torch.tensor([False, False]), torch.tensor([12, 3]))
+        >>> counts.end_episodes(torch.tensor([True, True]))
+        >>> counts.last_outcomes[0, 1].tolist(), counts.last_steps.tolist()
+        ([1, 0, 0], [[0, 12], [0, 0]])
+        >>> int(counts.steps.sum())  # the new episodes' counts start at 0
+        0
+    """
+
+    def __init__(self, population: int, slots: int, device=None):
+        i64 = dict(dtype=torch.int64, device=device)
+        self.outcomes = torch.zeros(population, slots, len(OUTCOMES), **i64)
+        self.steps = torch.zeros(population, slots, **i64)
+        self.last_outcomes, self.last_steps = self.outcomes.clone(), self.steps.clone()
+
+    def add(self, done: Tensor, slot: Tensor, success: Tensor, timeout: Tensor,
+            episode_end: Tensor, duration: Tensor) -> None:  # fmt: skip
+        """Rows ``done [P]`` ended an execution of ``slot [P]`` after ``duration [P]`` steps,
+        with the outcome flags given (all ``[P]``; none set: a truncated episode)."""
+        rows = done.nonzero()[:, 0]
+        if rows.numel() == 0:
+            return
+        k = slot[rows]
+        kinds = torch.stack([success, timeout, episode_end], 1)[rows].to(torch.int64)
+        self.outcomes[rows, k] += kinds
+        self.steps[rows, k] += duration[rows].to(torch.int64)
+
+    def end_episodes(self, rows: Tensor) -> None:
+        """Agents ``rows [P]`` ended an episode: their counts become the last episode's."""
+        keep = rows[:, None]
+        self.last_steps = torch.where(keep, self.steps, self.last_steps)
+        self.last_outcomes = torch.where(keep[..., None], self.outcomes, self.last_outcomes)
+        self.steps = torch.where(keep, torch.zeros_like(self.steps), self.steps)
+        self.outcomes = torch.where(keep[..., None], torch.zeros_like(self.outcomes),
+                                    self.outcomes)  # fmt: skip
+
+    _STATE = ("outcomes", "steps", "last_outcomes", "last_steps")
+
+    def state_dict(self) -> dict:
+        return {name: getattr(self, name).clone() for name in self._STATE}
+
+    def load_state_dict(self, state: dict) -> None:
+        device = self.steps.device
+        for name in self._STATE:
+            setattr(self, name, state[name].to(device).clone())
+
+
+# ----------------------------------------------------------------------------------------------
+# Gestation positives: the states each agent acted in this episode
+# ----------------------------------------------------------------------------------------------
+
+
+class RecentStates:
+    """The last ``length`` states of every agent's current episode, for gestation positives.
+
+    Deep skill chaining (Bagaria & Konidaris) makes a new option's initiation set local from
+    the start: during gestation, each time the option's target fires, the states that led to it
+    become positive examples. :meth:`record` keeps a ring of the states each agent acted in
+    this episode; :meth:`window` reads the last ``n`` of them, oldest first.
+
+    Example:
+        >>> import torch
+        >>> recent = RecentStates(population=2, length=3)
+        >>> for t in range(4):
+        ...     recent.record(torch.tensor([True, t < 1]), torch.full((2, 4), float(t)))
+        >>> agents, obs = recent.window(torch.tensor([True, True]), 3)
+        >>> agents.tolist(), obs[:, 0].tolist()           # agent 0: t = 1..3; agent 1: t = 0
+        ([0, 0, 0, 1], [1.0, 2.0, 3.0, 0.0])
+    """
+
+    def __init__(self, population: int, length: int, dtype=torch.float64, device=None,
+                 obs_dim: int = 4):  # fmt: skip
+        if length < 1:
+            raise ValueError(f"RecentStates needs length >= 1, got {length}")
+        self.length = int(length)
+        self.states = torch.zeros(population, self.length, obs_dim, dtype=dtype, device=device)
+        self.steps = torch.zeros(population, dtype=torch.int64, device=device)  # this episode
+
+    def record(self, rows: Tensor, obs: Tensor) -> None:
+        """Agents in ``rows [P]`` act in ``obs [P, 4]`` (the state a transition starts from)."""
+        if backend.NATIVE and backend.record_ring(self.states, self.steps, rows, obs):
+            return  # the same writes, compiled (this runs every step)
+        index = rows.nonzero()[:, 0]
+        if index.numel() == 0:
+            return
+        self.states[index, self.steps[index] % self.length] = obs[index].to(self.states.dtype)
+        self.steps[index] += 1
+
+    def start_episodes(self, rows: Tensor) -> None:
+        """Agents in ``rows [P]`` start an episode: their earlier states no longer count."""
+        self.steps = torch.where(rows, torch.zeros_like(self.steps), self.steps)
+
+    def window(self, rows: Tensor, n: int) -> tuple[Tensor, Tensor]:
+        """``(agents [M], obs [M, 4])``: the last ``min(n, length, steps)`` states of each agent
+        in ``rows [P]``, oldest first, agents in ascending order."""
+        n = min(int(n), self.length)
+        index = rows.nonzero()[:, 0]
+        taken = self.steps[index].clamp(max=n)  # [A]
+        back = torch.arange(n, 0, -1, device=self.steps.device)  # n .. 1 steps back
+        keep = back[None, :] <= taken[:, None]  # [A, n]
+        place = (self.steps[index, None] - back[None, :]) % self.length
+        agent = index[:, None].expand(-1, n)
+        return agent[keep], self.states[agent[keep], place[keep]]
+
+    def state_dict(self) -> dict:
+        return {"states": self.states.clone(), "steps": self.steps.clone()}
+
+    def load_state_dict(self, state: dict) -> None:
+        device = self.steps.device
+        self.states = state["states"].to(device).clone()
+        self.steps = state["steps"].to(device).clone()
+

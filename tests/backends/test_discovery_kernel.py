@@ -7,9 +7,13 @@ import torch
 
 from skillchain_torch.backends import discovery as native_discovery
 from skillchain_torch.discovery import InitiationReading, RecentStates, SkillChaining
-from skillchain_torch.discovery.events import event_list, target_indicator
-from skillchain_torch.discovery.executions import ExecutionTrace
-from skillchain_torch.discovery.overlap import exclude_overlap, overlap_exclusion
+from skillchain_torch.discovery.skill_chaining import (
+    ExecutionTrace,
+    event_list,
+    exclude_overlap,
+    overlap_exclusion,
+    target_indicator,
+)
 from skillchain_torch.options import OptionBank, OptionStatus
 
 needs_native = pytest.mark.skipif(

@@ -43,9 +43,9 @@ def test_built_in_ci():
 
 
 def test_doctest():
-    from skillchain_torch.agents import compiled_step, step_state
+    from skillchain_torch.agents import hierarchical, step_state
 
-    for module in (native_hierarchical, step_state, compiled_step):
+    for module in (native_hierarchical, step_state, hierarchical):
         assert doctest.testmod(module).failed == 0, module.__name__
 
 

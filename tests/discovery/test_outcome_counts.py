@@ -6,7 +6,7 @@ from __future__ import annotations
 import torch
 
 from skillchain_torch.agents import SkillChainingAgent
-from skillchain_torch.discovery.executions import OUTCOMES
+from skillchain_torch.discovery.skill_chaining import OUTCOMES
 
 
 def test_outcomes_by_kind():

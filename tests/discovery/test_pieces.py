@@ -19,8 +19,7 @@ from skillchain_torch.discovery import (
 )
 from skillchain_torch.options import OptionBank
 
-MODULES = ["convergence", "creation", "events", "executions", "gestation", "overlap",
-           "skill_chaining"]  # fmt: skip
+MODULES = ["convergence", "gestation", "readings", "skill_chaining"]
 
 
 @pytest.mark.parametrize("name", MODULES)
@@ -30,7 +29,7 @@ def test_doctests(name):
 
 
 def test_agent_doctests():
-    for name in ("skillchain_torch.agents.skill_chaining",
+    for name in ("skillchain_torch.agents.hierarchical",
                  "skillchain_torch.trainers.skill_chaining"):
         assert doctest.testmod(importlib.import_module(name)).failed == 0
 

@@ -28,7 +28,7 @@ from skillchain_torch.trainers.option_monitor import (
 X, Y, XD, X2, Y2 = 1, 2, 3, 5, 9
 
 
-@pytest.mark.parametrize("name", ["option_monitor", "option_counts", "initiation_images"])
+@pytest.mark.parametrize("name", ["option_monitor", "initiation_images"])
 def test_doctests(name):
     module = importlib.import_module(f"skillchain_torch.trainers.{name}")
     assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
