@@ -25,6 +25,14 @@ interface             the paper's implementation                  shapes
 ``P`` agents of a population, ``K`` option slots per agent, ``D`` observation dims, ``A``
 primitive actions, ``F`` features.
 
+Two seams join the pieces to the trainer: :class:`EpisodeAgent`, the protocol every agent of a
+trainer follows (:class:`~skillchain_torch.agents.FlatSarsaAgent`,
+:class:`~skillchain_torch.agents.HierarchicalAgent` and
+:class:`~skillchain_torch.agents.SkillChainingAgent`, or a researcher's own), and
+:class:`EnvStepper`, what steps the population's envs for it (Pinball's
+:class:`~skillchain_torch.envs.pinball.stepper.ActiveEnvStepper`, or
+:class:`~skillchain_torch.trainers.env_stepper.EnvStepper` over TorchRL envs).
+
 The protocols are ``runtime_checkable`` (``isinstance`` tests that the methods exist, not their
 shapes); :func:`missing_methods` names what a candidate lacks.
 
@@ -47,7 +55,7 @@ from skillchain_torch.options.q_head import OptionQHead as OptionHead
 from skillchain_torch.options.termination import TerminationPredicate
 
 __all__ = ["InitiationSet", "Learner", "OptionHead", "TerminationPredicate", "ValueHead",
-           "missing_methods"]
+           "EpisodeAgent", "EnvStepper", "missing_methods"]
 
 
 @runtime_checkable
@@ -153,6 +161,84 @@ class Learner(Protocol):
     """
 
     def __call__(self, head: Any, *args: Tensor, **kwargs: Any) -> Tensor: ...
+
+
+@runtime_checkable
+class EpisodeAgent(Protocol):
+    """P agents as a trainer drives them: compact rows of the active agents (ascending ids) in,
+    primitive actions ``[n]`` out.
+
+    The trainer calls :meth:`begin` at the start observations, then :meth:`observe` after each
+    step in which no episode ended, or :meth:`observe_ends` after one in which some did (terminal
+    updates do not bootstrap, truncated ones do; ``restart_rows`` then start again at
+    ``start_obs``), and :meth:`compact` when agents finish their last episode.
+
+    Attributes:
+        population (P).
+    """
+
+    population: int
+
+    def begin(self, obs: Tensor) -> Tensor:
+        """First actions ``[n]`` of the active agents at their start observations ``[n, D]``."""
+
+    def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
+        """Learn from a step in which no episode ended (``obs [n, D]``, ``reward [n]``); the
+        next actions ``[n]``."""
+
+    def observe_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
+                     restart_rows: Tensor, start_obs: Tensor | None) -> Tensor:
+        """Learn from a step in which episodes ended; restart ``restart_rows`` (compact rows) at
+        ``start_obs``; the next actions ``[n]``."""
+
+    def compact(self, keep: Tensor) -> None:
+        """Keep the active rows where ``keep [n]``; the others stop for good."""
+
+    @property
+    def actions(self) -> Tensor:
+        """The primitive action of each active row ``[n]``."""
+
+    @property
+    def index(self) -> Tensor:
+        """Ids of the active agents, ascending ``[n]``."""
+
+    def flush(self) -> None:
+        """Write back whatever a compiled step keeps apart (before reading the weights)."""
+
+    def state_dict(self) -> dict[str, Any]: ...
+
+    def load_state_dict(self, state: dict[str, Any]) -> Any: ...
+
+
+@runtime_checkable
+class EnvStepper(Protocol):
+    """The population's envs as the trainer steps them: compact rows of the active envs.
+
+    Attributes:
+        num_active: how many envs still step.
+    """
+
+    num_active: int
+
+    def start(self) -> Tensor:
+        """Reset every env; all active; observations ``[P, D]``."""
+
+    def step(self, action: Tensor) -> tuple[Tensor, Tensor, tuple[Tensor, Tensor] | None]:
+        """Step the active rows: ``(observation [n, D], reward [n], ends)``; ``ends`` is
+        ``None`` when no episode ended, else ``(terminated, truncated)`` bool ``[n]``."""
+
+    def reset(self, rows: Tensor) -> Tensor:
+        """Restart the envs of compact ``rows``; their observations ``[len(rows), D]``."""
+
+    def compact(self, keep: Tensor) -> None:
+        """Keep only the rows where ``keep`` (bool ``[n]``); the others stop stepping."""
+
+    def sync(self) -> None:
+        """Write back whatever a compiled step keeps apart (before a checkpoint)."""
+
+    def state_dict(self) -> dict[str, Any]: ...
+
+    def load_state_dict(self, state: dict[str, Any]) -> None: ...
 
 
 def missing_methods(piece: object, interface: type) -> list[str]:

@@ -132,6 +132,8 @@ def read_checkpoint(path: str | Path) -> dict:
     for section, keys in _SECTIONS.items():
         if section == "env" and state["env"].get("kind") == "torchrl-envs":
             keys = ("index", "step_count")  # (EnvStepper: a Gymnasium/TorchRL env's counters)
+        if section == "agent" and state["trainer"].get("user_agent"):
+            keys = ()  # a user's agent (interfaces.EpisodeAgent) saves what it declares
         for key in keys:
             if key not in state[section]:
                 raise DamagedCheckpoint(f"{path}: field '{section}.{key}' is missing")

@@ -397,6 +397,7 @@ class PopulationTrainer:
                 "elapsed": self.elapsed,
                 "started": self.started,
                 "next_checkpoint": self._next_checkpoint,
+                "user_agent": self.user_agent,  # its agent section is what the agent declares
             },
             "modules": {name: m.state_dict() for name, m in self._modules.items()},
         }
@@ -453,6 +454,8 @@ class PopulationTrainer:
         working = getattr(agent, "working_weights", None)  # the flat agent's, without a flush
         if rows is not None and working is not None:
             top = working(rows)
+        elif getattr(agent, "q_head", None) is None:  # an agent of the protocol alone
+            top = []  # (EpisodeAgent declares no head; nothing the trainer can check)
         else:
             top = [pick(t) for t in _per_agent(agent.q_head, agent.population)]
         learners = [("the top-level Q-head", f"lower --alpha (now {cfg.alpha:g})",
@@ -493,7 +496,7 @@ class PopulationTrainer:
         # A sum is non-finite if any term is (an overflowing sum of finite weights is looked
         # at below and passes).
         sums = [t.sum() for _, _, tensors in learners for t in tensors]
-        if math.isfinite(torch.stack(sums).sum()):
+        if not sums or math.isfinite(torch.stack(sums).sum()):
             return
         ids = (torch.arange(self.config.runs) if rows is None else self.agent.index[rows]).tolist()
         found: dict[str, list[int]] = {}
