@@ -3,10 +3,11 @@
     python benchmarks/readers_path.py                 # 20 population steps after 60,000 agent steps
     python benchmarks/readers_path.py --steps 1 --warmup 20000
 
-Issue 51 asks that one skill-chaining step, read top to bottom on the torch path, enter at most
-6 core files (outside the pieces, the utilities and the env), and arrive back in one already
-entered and left at most 8 times besides the algorithm's own file. This script measures it: it trains a small population (2 agents,
-``pinball_simple_single``, seed 0) on the torch path everywhere (``native=False`` and
+Issue 51 asks that one skill-chaining step, read top to bottom on the torch path, enter at
+most 6 core files (outside the pieces, the utilities and the env), and arrive back in one
+already entered and left at most 8 times besides the algorithm's own file. This script
+measures it: it trains a small population (2 agents, ``pinball_simple_single``, seed 0) on the
+torch path everywhere (``native=False`` and
 :func:`~skillchain_torch.backends.select.same_bits_kernels` off) until options exist, then
 traces ``stepper.step`` + ``agent.observe`` for a few population steps with
 :func:`sys.settrace` and prints every file of this repository that a Python call entered, in
