@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skillchain_torch.trainers.plots import plot_learning_curve
+from skillchain_torch.trainers.outputs.plots import plot_learning_curve
 from skillchain_torch.trainers.study.summary import window_stats
 
 DEFAULT_WINDOWS = "1-5,6-10,11-20,21-40"
@@ -55,7 +55,7 @@ def load_returns(run_dir: str | Path, partial: bool = False) -> tuple[np.ndarray
     if (run / "returns.npy").is_file():
         returns = np.load(run / "returns.npy")
     elif partial:
-        from skillchain_torch.trainers.checkpoint import latest_checkpoint, read_checkpoint
+        from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint, read_checkpoint
 
         path = latest_checkpoint(run)
         if path is None:

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-SKILLCHAIN = [sys.executable, "-m", "skillchain_torch.trainers.cli"]
+SKILLCHAIN = [sys.executable, "-m", "skillchain_torch.trainers.config.cli"]
 
 
 def load() -> str:

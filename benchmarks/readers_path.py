@@ -63,8 +63,8 @@ def trace(steps: int, warmup: int):
     the callee's file, a return in the caller's; consecutive repeats merged), which issue 51's
     entries and re-arrivals are counted from."""
     from skillchain_torch.backends.select import same_bits_kernels
-    from trainers.config import TrainConfig
-    from trainers.population import PopulationTrainer
+    from skillchain_torch.trainers.config.config import TrainConfig
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
 
     root = f"{ROOT}/"
     here = str(Path(__file__).resolve())

@@ -31,7 +31,7 @@ trainer follows (:class:`~skillchain_torch.agents.FlatSarsaAgent`,
 :class:`~skillchain_torch.agents.SkillChainingAgent`, or a researcher's own), and
 :class:`EnvStepper`, what steps the population's envs for it (Pinball's
 :class:`~skillchain_torch.envs.pinball.stepper.ActiveEnvStepper`, or
-:class:`~skillchain_torch.trainers.env_stepper.EnvStepper` over TorchRL envs).
+:class:`~skillchain_torch.trainers.loop.env_stepper.EnvStepper` over TorchRL envs).
 
 The protocols are ``runtime_checkable`` (``isinstance`` tests that the methods exist, not their
 shapes); :func:`missing_methods` names what a candidate lacks.
@@ -67,6 +67,11 @@ class InitiationSet(Protocol):
     base class: the stores, the distance constraint, a gradient fit of its own parameters, a
     convergence measure from its outputs, images, and save/load through the registry
     (:func:`~skillchain_torch.options.register_classifier`).
+
+    A class of the user's own that implements the methods below without subclassing it works
+    too (``tests/test_seams.py`` trains one under skill chaining): the option set takes its
+    device from ``trained`` and its observation size from the option head, and the compiled
+    paths (``native``, the stores' kernels) are only ever asked of the built-in class.
 
     Attributes:
         population, slots: P and K.

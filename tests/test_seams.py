@@ -27,7 +27,7 @@ def test_built_in_agents_follow_the_episode_protocol(agent):
 def test_both_steppers_follow_the_stepper_protocol():
     from skillchain_torch.envs.pinball import PinballEnv
     from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
-    from skillchain_torch.trainers.env_stepper import EnvStepper as TorchRLEnvStepper
+    from skillchain_torch.trainers.loop.env_stepper import EnvStepper as TorchRLEnvStepper
 
     stepper = ActiveEnvStepper(PinballEnv("pinball_box", batch_size=[2], seed=0))
     assert isinstance(stepper, EnvStepper), missing_methods(stepper, EnvStepper)
@@ -86,7 +86,7 @@ class RandomAgent:
 
 def test_an_agent_from_the_protocol_alone_trains(tmp_path):
     from skillchain_torch.trainers import TrainConfig
-    from skillchain_torch.trainers.population import PopulationTrainer
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
 
     agent = RandomAgent(population=2)
     assert isinstance(agent, EpisodeAgent)
@@ -94,3 +94,78 @@ def test_an_agent_from_the_protocol_alone_trains(tmp_path):
     trainer = PopulationTrainer(config, out_dir=tmp_path, agent=agent).train()
     returns = np.asarray(trainer.returns)
     assert returns.shape == (2, 2) and np.isfinite(returns).all()
+
+
+class DelegatingSet(torch.nn.Module):
+    """An initiation set from the protocol alone (no library base class besides ``nn.Module``):
+    it owns a logistic classifier and answers every declared method through it."""
+
+    def __init__(self, population, slots, **kwargs):
+        super().__init__()
+        from skillchain_torch.options import InitiationClassifier
+
+        self.inner = InitiationClassifier(population, slots, **kwargs)
+        self.population, self.slots, self.config = population, slots, dict(self.inner.config)
+
+    @property
+    def trained(self):
+        return self.inner.trained
+
+    def logit(self, obs):
+        return self.inner.logit(obs)
+
+    def contains(self, obs):
+        return self.inner.contains(obs)
+
+    def contains_points(self, agent, slot, obs):
+        return self.inner.contains_points(agent, slot, obs)
+
+    def add_examples(self, agents, slots, obs, labels):
+        return self.inner.add_examples(agents, slots, obs, labels)
+
+    def stored_classes(self):
+        return self.inner.stored_classes()
+
+    def has_both_classes(self):
+        return self.inner.has_both_classes()
+
+    def fit(self, mask=None):
+        return self.inner.fit(mask)
+
+    def constrain(self, mask):
+        self.inner.constrain(mask)
+
+    def reset_slots(self, mask):
+        self.inner.reset_slots(mask)
+
+    def snapshot(self):
+        return self.inner.snapshot()
+
+    def weight_change(self, before, after=None):
+        return self.inner.weight_change(before, after)
+
+    def select_agents(self, index, seeds=None):
+        raise NotImplementedError("not needed to train")
+
+
+def test_an_initiation_set_from_the_protocol_alone_learns_under_skill_chaining(tmp_path):
+    """Issue 51: a class implementing InitiationSet without subclassing InitiationClassifier used
+    to fail on ``seeds``, ``examples``, ``native`` and ``lr`` (an ``OptionBank`` without
+    ``obs_dim``); now discovery stores its examples and fits it, and the trainer checks it."""
+    from skillchain_torch.agents import SkillChainingAgent
+    from skillchain_torch.interfaces import InitiationSet
+    from skillchain_torch.options import FourierOptionQHead, OptionBank
+    from skillchain_torch.trainers import TrainConfig
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
+
+    sets = DelegatingSet(2, 4, capacity=64)
+    assert isinstance(sets, InitiationSet), missing_methods(sets, InitiationSet)
+    bank = OptionBank(2, 4, FourierOptionQHead(2, 4, order=1), sets)
+    assert bank.obs_dim == 4
+    agent = SkillChainingAgent(bank, order=2, gestation=1)
+    config = TrainConfig(runs=2, episodes=12, map="pinball_box", agent="skill-chaining",
+                         max_episode_steps=300)
+    PopulationTrainer(config, out_dir=tmp_path, agent=agent).train()
+    assert int(bank.live().sum()) > 0  # discovery created options with it
+    assert int(sets.inner.count.sum()) > 0 and bool(sets.trained.any())  # examples, fits
+    assert (tmp_path / "checkpoints").is_dir()

@@ -17,7 +17,8 @@ This is the env's documented fast path, and it lives in the env's own package: i
 code outside :class:`PinballEnv` that touches the env's simulator holder (``env._sim``:
 ``state``, ``step_count``, ``done``, ``rng``), because the env has no masked ``step_raw`` and no
 ``state_dict`` for its raw state yet. The trainer uses it for Pinball and
-:class:`~skillchain_torch.trainers.env_stepper.EnvStepper` (``EnvBase.step``) for any other env.
+:class:`~skillchain_torch.trainers.loop.env_stepper.EnvStepper` (``EnvBase.step``) for any
+other env.
 """
 
 from __future__ import annotations

@@ -16,9 +16,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root
 
-from trainers.config import TrainConfig  # noqa: E402
-from trainers.population import PopulationTrainer  # noqa: E402
-from trainers.run_outputs import train_and_write  # noqa: E402
+from skillchain_torch.trainers.config.config import TrainConfig  # noqa: E402
+from skillchain_torch.trainers.loop.population import PopulationTrainer  # noqa: E402
+from skillchain_torch.trainers.outputs.run_outputs import train_and_write  # noqa: E402
 
 
 def main(argv: list[str]) -> int:
@@ -28,8 +28,8 @@ def main(argv: list[str]) -> int:
         print(f"{out}: done")
         return 0
     if (out / "checkpoints").is_dir() and any((out / "checkpoints").iterdir()):
-        return subprocess.call([sys.executable, "-m", "trainers.cli", "train", "--resume",
-                                str(out), "--quiet", "--threads", "1"])  # fmt: skip
+        return subprocess.call([sys.executable, "-m", "skillchain_torch.trainers.config.cli",
+                                "train", "--resume", str(out), "--quiet", "--threads", "1"])
     fields = json.loads((Path(source) / "config.json").read_text())
     for item in overrides:
         key, value = item.split("=", 1)

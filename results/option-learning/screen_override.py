@@ -57,7 +57,7 @@ def main(argv: list[str]) -> int:
     from skillchain_torch import presets
 
     presets.PRESETS["default"] = presets.DEFAULT.replace(**json.loads(override))
-    from skillchain_torch.trainers.cli import main as skillchain
+    from skillchain_torch.trainers.config.cli import main as skillchain
 
     out = HERE / "screen" / name
     if (out / "returns.npy").exists():

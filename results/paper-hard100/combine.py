@@ -38,7 +38,7 @@ def stack(first: Path, second: Path, out: Path) -> dict:
                  f"{a['seed']} + {a['runs']} runs")
     import dataclasses
 
-    from trainers.config import TrainConfig
+    from skillchain_torch.trainers.config.config import TrainConfig
 
     # Fields added since the first study read as what it ran with (LEGACY_FIELDS); the given
     # options are each study's own file.

@@ -57,7 +57,7 @@ def _experiments():
 
 def _train(config, run_dir: Path) -> float:
     """Train (or resume, or skip if done) ``config`` in ``run_dir``; its wall time so far."""
-    from skillchain_torch.trainers.config import TrainConfig
+    from skillchain_torch.trainers.config.config import TrainConfig
     from skillchain_torch.trainers.study.reproduce import train_dir
 
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -35,10 +35,10 @@ RUNS = ("end-outside-k48-seeds1000-1049", "end-outside-k48-seeds1050-1074",
 
 def main() -> None:
     sys.path.insert(0, str(ROOT))
+    from skillchain_torch.trainers.config.config import TrainConfig
+    from skillchain_torch.trainers.distributed.block_merge import merge_blocks
+    from skillchain_torch.trainers.distributed.blocks import ShardedRun, block_config
     from skillchain_torch.trainers.study.reproduce import paper_experiments
-    from trainers.block_merge import merge_blocks
-    from trainers.blocks import ShardedRun, block_config
-    from trainers.config import TrainConfig
 
     [exp] = [e for e in paper_experiments(instances=("hard",)) if e.agent == "skill-chaining"]
     out = HERE / exp.name

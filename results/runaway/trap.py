@@ -20,8 +20,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from skillchain_torch.envs.pinball.maps import load_map  # noqa: E402
 from skillchain_torch.envs.pinball.render import plot_trajectories  # noqa: E402
-from skillchain_torch.trainers.config import TrainConfig  # noqa: E402
-from skillchain_torch.trainers.population import PopulationTrainer  # noqa: E402
+from skillchain_torch.trainers.config.config import TrainConfig  # noqa: E402
+from skillchain_torch.trainers.loop.population import PopulationTrainer  # noqa: E402
 
 run, agent, episode = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 cfg = TrainConfig.load_json(f"{run}/config.json").resolved()

@@ -64,7 +64,7 @@ from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy, epsilon_greed
 from skillchain_torch.rng import CounterRNG
 
 if TYPE_CHECKING:  # the run config is the trainers' (an agent reads only its fields)
-    from skillchain_torch.trainers.config import TrainConfig
+    from skillchain_torch.trainers.config.config import TrainConfig
 
 __all__ = ["FlatSarsaAgent", "AGENT_STREAM", "BLOCK_DECISIONS"]
 

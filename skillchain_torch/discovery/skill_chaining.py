@@ -911,16 +911,16 @@ class ExecutionTrace:
 
         A compiled classifier stores them straight from the trace (the same examples in the
         same order, so the same stores)."""
-        if (classifier.native and self.states.dtype == torch.float64
-                and self.states.shape[-1] == OBS_DIM):  # fmt: skip
+        if (getattr(classifier, "native", False) and self.states.dtype == torch.float64
+                and self.states.shape[-1] == OBS_DIM):  # fmt: skip (the built-in's kernel)
             touched = torch.zeros(classifier.population, classifier.slots, dtype=torch.bool)
             initiation_backend.store_executions(classifier.stores, self.states, slot, duration,
                                                 success, failure, touched)  # fmt: skip
             classifier.dirty |= touched
             return touched
         agents, slots, obs, labels = self.examples(slot, duration, success, failure)
-        if agents.numel() == 0:
-            return torch.zeros_like(classifier.dirty)
+        if agents.numel() == 0:  # (trained: the [P, K] mask every InitiationSet declares)
+            return torch.zeros_like(classifier.trained)
         return classifier.add_examples(agents, slots, obs, labels)
 
     def drop_updates(self, slot: Tensor, failure: Tensor) -> None:

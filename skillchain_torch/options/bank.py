@@ -83,7 +83,7 @@ class OptionBank(nn.Module):
         # the bank so a run on another map refuses them); None: not known.
         self.map: str | None = None
         self.legacy = False  # loaded from a file saved before banks recorded their environment
-        device = classifier.seeds.device
+        device = classifier.trained.device  # (InitiationSet declares trained [P, K])
         self.register_buffer("status", torch.zeros(population, slots, dtype=torch.int64,
                                                    device=device))  # fmt: skip
         for name in _METADATA[1:]:
@@ -122,8 +122,9 @@ class OptionBank(nn.Module):
 
     @property
     def obs_dim(self) -> int:
-        """The observation size the initiation classifiers (and option heads) take."""
-        return int(self.classifier.examples.shape[-1])
+        """The observation size the option heads (and initiation sets) take (the option head
+        declares it: :class:`~skillchain_torch.interfaces.OptionHead`)."""
+        return int(self.q_head.obs_dim)
 
     @property
     def num_actions(self) -> int:

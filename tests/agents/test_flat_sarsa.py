@@ -33,8 +33,8 @@ def _same_weights(native, got, expected):
 
 
 def test_doctests():
-    for name in ("skillchain_torch.agents.flat_sarsa", "skillchain_torch.trainers.agents",
-                 "skillchain_torch.trainers.config", "skillchain_torch.backends.sarsa"):
+    for name in ("skillchain_torch.agents.flat_sarsa", "skillchain_torch.trainers.config.registry",
+                 "skillchain_torch.trainers.config.config", "skillchain_torch.backends.sarsa"):
         module = importlib.import_module(name)
         assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 
@@ -215,7 +215,7 @@ def test_native_q_values_agree_with_linear_q_head():
 @pytest.mark.skipif(not native_sarsa.AVAILABLE, reason="the compiled kernels were not built")
 def test_resuming_with_the_other_kernel_names_the_checkpoint(tmp_path):
     from skillchain_torch.trainers import PopulationTrainer
-    from skillchain_torch.trainers.checkpoint import load_checkpoint
+    from skillchain_torch.trainers.outputs.checkpoint import load_checkpoint
 
     cfg = TrainConfig(runs=2, episodes=2, max_episode_steps=50, checkpoint_every=1)
     path = PopulationTrainer(cfg, out_dir=tmp_path, native=False).train().checkpoint_path()

@@ -85,8 +85,8 @@ def test_region_option_file_round_trip(tmp_path):
 
 
 def test_given_options_agent(tmp_path):
-    from skillchain_torch.trainers.config import TrainConfig
-    from skillchain_torch.trainers.given_options import GivenOptionsAgent
+    from skillchain_torch.agents.given_options import GivenOptionsAgent
+    from skillchain_torch.trainers.config.config import TrainConfig
 
     path = tmp_path / "region.pt"
     make_region_option(examples=200, pretrain_steps=20, batch=20).save(path)
@@ -104,11 +104,12 @@ def test_given_options_agent(tmp_path):
 
 
 def test_population_trainer_drives_given_options(tmp_path, monkeypatch):
-    from skillchain_torch.trainers import agents as registry
-    from skillchain_torch.trainers.config import TrainConfig
-    from skillchain_torch.trainers.population import PopulationTrainer
+    from skillchain_torch.trainers.config import registry
+    from skillchain_torch.trainers.config.config import TrainConfig
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
 
-    monkeypatch.setitem(registry.AGENTS, "given-options", "given_options:GivenOptionsAgent")
+    monkeypatch.setitem(registry.AGENTS, "given-options",
+                        "skillchain_torch.agents.given_options:GivenOptionsAgent")
     bank = OptionBank.build(1, slots=2, order=2)  # untrained classifiers: available everywhere
     bank.status[0, 0] = int(OptionStatus.LEARNED)
     bank.target_event[0, 0] = 0  # the goal
@@ -138,11 +139,12 @@ def test_population_trainer_drives_given_options(tmp_path, monkeypatch):
 def test_trainer_resume_matches_uninterrupted(tmp_path, monkeypatch):
     import io
 
-    from skillchain_torch.trainers import agents as registry
-    from skillchain_torch.trainers.config import TrainConfig
-    from skillchain_torch.trainers.population import PopulationTrainer
+    from skillchain_torch.trainers.config import registry
+    from skillchain_torch.trainers.config.config import TrainConfig
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
 
-    monkeypatch.setitem(registry.AGENTS, "given-options", "given_options:GivenOptionsAgent")
+    monkeypatch.setitem(registry.AGENTS, "given-options",
+                        "skillchain_torch.agents.given_options:GivenOptionsAgent")
     bank = OptionBank.build(1, slots=1, order=2)
     bank.status[0, 0] = int(OptionStatus.LEARNED)
     bank.target_event[0, 0] = 0

@@ -30,7 +30,7 @@ def test_doctests(name):
 
 def test_agent_doctests():
     for name in ("skillchain_torch.agents.hierarchical",
-                 "skillchain_torch.trainers.skill_chaining"):
+                 "skillchain_torch.agents.skill_chaining_run"):
         assert doctest.testmod(importlib.import_module(name)).failed == 0
 
 

@@ -172,7 +172,7 @@ def test_per_agent_seeds_reach_the_replay_streams_and_bad_combinations_are_refus
 def test_a_neural_run_resumes_from_its_checkpoint_on_its_device(tmp_path, device):
     """A checkpoint is read onto the CPU; the replay memories, targets and counters go back to
     the run's device (on CUDA they stayed on the CPU and the next step mixed devices)."""
-    from skillchain_torch.trainers.checkpoint import resume_checkpoint
+    from skillchain_torch.trainers.outputs.checkpoint import resume_checkpoint
 
     def config(episodes=3):
         return TrainConfig(agent="skill-chaining", preset="paper", map="pinball_box", runs=2,

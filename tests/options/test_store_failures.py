@@ -87,7 +87,7 @@ def test_the_flag_reaches_the_classifier(tmp_path):
     import json
 
     from skillchain_torch.agents import SkillChainingAgent
-    from skillchain_torch.trainers.cli import main
+    from skillchain_torch.trainers.config.cli import main
 
     agent = SkillChainingAgent.build(population=1, slots=2, order=1, store_failures=True)
     assert agent.bank.classifier.store_failures

@@ -31,7 +31,7 @@ from skillchain_torch.options import (
     register_classifier,
     register_q_head,
 )
-from skillchain_torch.trainers.option_monitor import initiation_density
+from skillchain_torch.trainers.outputs.option_monitor import initiation_density
 
 F64 = torch.float64
 

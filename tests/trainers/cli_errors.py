@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from skillchain_torch.trainers.cli import main
+from skillchain_torch.trainers.config.cli import main
 
 SCRIPT = Path(sys.executable).parent / "skillchain"
 TINY = ["--map", "pinball_box", "--runs", "1", "--episodes", "1", "--max-episode-steps", "50",

@@ -4,7 +4,7 @@ finished tiny run for the command-line hardening tests."""
 import pytest
 from cli_errors import TINY
 
-from skillchain_torch.trainers.cli import main
+from skillchain_torch.trainers.config.cli import main
 
 
 @pytest.fixture(scope="session")

@@ -18,7 +18,7 @@ from skillchain_torch.trainers import (
     latest_checkpoint,
     load_checkpoint,
 )
-from skillchain_torch.trainers.cli import main
+from skillchain_torch.trainers.config.cli import main
 
 ANNEALED = TrainConfig(agent="skill-chaining", map="pinball_empty", runs=2, episodes=4, seed=3,
                        max_episode_steps=60, checkpoint_every=2, epsilon=0.0, epsilon_init=1.0,

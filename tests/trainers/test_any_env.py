@@ -12,7 +12,7 @@ import torch
 
 from skillchain_torch.envs.external import make_env, parse_bounds, read_specs
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
-from skillchain_torch.trainers.cli import main
+from skillchain_torch.trainers.config.cli import main
 from skillchain_torch.trainers.study.verify import verify_run
 
 MOUNTAIN_CAR = "gymnasium:MountainCar-v0"

@@ -14,8 +14,8 @@ from skillchain_torch.trainers import (
     latest_checkpoint,
     load_checkpoint,
 )
-from skillchain_torch.trainers import checkpoint as checkpoint_module
-from skillchain_torch.trainers.checkpoint import (
+from skillchain_torch.trainers.outputs import checkpoint as checkpoint_module
+from skillchain_torch.trainers.outputs.checkpoint import (
     DamagedCheckpoint,
     payload_digest,
     read_checkpoint,

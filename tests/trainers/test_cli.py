@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from skillchain_torch.trainers.cli import main
+from skillchain_torch.trainers.config.cli import main
 
 SMALL = ["--map", "pinball_box", "--episodes", "2", "--max-episode-steps", "300", "--quiet"]
 
@@ -163,7 +163,7 @@ def test_torch_only_run_resumes_only_as_torch_only(tmp_path, capsys):
 
 def test_failure_bootstrap_and_kept_negatives_flags_and_legacy_configs(tmp_path):
     from skillchain_torch.trainers import TrainConfig
-    from skillchain_torch.trainers.cli import _config_from_args, build_parser
+    from skillchain_torch.trainers.config.cli import _config_from_args, build_parser
 
     parser = build_parser()
     args = parser.parse_args(["train", "--agent", "skill-chaining", "--failure-bootstrap",
@@ -183,9 +183,9 @@ def test_failure_bootstrap_and_kept_negatives_flags_and_legacy_configs(tmp_path)
 
 @pytest.mark.parametrize("field", ["intra_option_primitives", "option_interruption"])
 def test_top_level_learning_flags_reach_the_agent(tmp_path, field):
+    from skillchain_torch.agents.skill_chaining_run import SkillChainingRunAgent
     from skillchain_torch.trainers import TrainConfig
-    from skillchain_torch.trainers.cli import _config_from_args, build_parser
-    from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+    from skillchain_torch.trainers.config.cli import _config_from_args, build_parser
 
     flag = "--" + field.replace("_", "-")
     parser = build_parser()
@@ -204,9 +204,9 @@ def test_top_level_learning_flags_reach_the_agent(tmp_path, field):
 
 @pytest.mark.parametrize("value", ["off", "learned", "always"])
 def test_end_outside_set_reaches_the_agent(tmp_path, value):
+    from skillchain_torch.agents.skill_chaining_run import SkillChainingRunAgent
     from skillchain_torch.trainers import TrainConfig
-    from skillchain_torch.trainers.cli import _config_from_args, build_parser
-    from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+    from skillchain_torch.trainers.config.cli import _config_from_args, build_parser
 
     parser = build_parser()
     args = parser.parse_args(["train", "--agent", "skill-chaining", "--out", str(tmp_path),
@@ -219,7 +219,7 @@ def test_end_outside_set_reaches_the_agent(tmp_path, value):
 
 
 def test_option_start_and_learning_flags_reach_the_config(tmp_path):
-    from skillchain_torch.trainers.cli import _config_from_args, build_parser
+    from skillchain_torch.trainers.config.cli import _config_from_args, build_parser
 
     parser = build_parser()
     args = parser.parse_args(["train", "--agent", "skill-chaining", "--policy-start",
@@ -239,7 +239,7 @@ def test_ctrl_c_says_resume_only_when_a_checkpoint_exists(tmp_path, capsys, monk
     """Ctrl-C after the second episode of three: with a checkpoint behind it the hint is
     --resume, and that resume finishes the run; with none written it says so and --overwrite
     starts again."""
-    from skillchain_torch.trainers.population import PopulationTrainer
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
 
     train = PopulationTrainer.train
 
@@ -268,7 +268,7 @@ def test_ctrl_c_says_resume_only_when_a_checkpoint_exists(tmp_path, capsys, monk
 
 def test_the_commit_is_read_when_the_run_starts(tmp_path, monkeypatch):
     """run_info.json names the code the process runs, not a commit made while it ran."""
-    from skillchain_torch.trainers import run_outputs
+    from skillchain_torch.trainers.outputs import run_outputs
 
     monkeypatch.setattr(run_outputs, "_COMMIT", run_outputs._UNREAD)
     reads = iter(["aaaa", "bbbb"])

@@ -24,10 +24,10 @@ from cli_errors import TINY, error_line, main_refused, refused, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from skillchain_torch.trainers import config as config_module
-from skillchain_torch.trainers import run_outputs
-from skillchain_torch.trainers.cli import main
-from skillchain_torch.trainers.config import INT64_MAX, ConfigError, TrainConfig
+from skillchain_torch.trainers.config import config as config_module
+from skillchain_torch.trainers.config.cli import main
+from skillchain_torch.trainers.config.config import INT64_MAX, ConfigError, TrainConfig
+from skillchain_torch.trainers.outputs import run_outputs
 
 
 def test_cli_errors_doctest():

@@ -17,7 +17,7 @@ import pytest
 import torch
 from cli_errors import TINY, error_line, main_refused, refused, run_cli
 
-from skillchain_torch.trainers.cli import main
+from skillchain_torch.trainers.config.cli import main
 
 
 # 5. output directories -----------------------------------------------------------------------

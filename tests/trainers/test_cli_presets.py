@@ -12,12 +12,12 @@ import pytest
 import torch
 
 from skillchain_torch.agents import SkillChainingAgent
+from skillchain_torch.agents.skill_chaining_run import SkillChainingRunAgent
 from skillchain_torch.presets import DEFAULT, PAPER, PRESET_FIELDS
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
-from skillchain_torch.trainers.cli import _config_from_args, build_parser, main
-from skillchain_torch.trainers.config import PRESET_CONFIG_FIELDS, UNREAD_FIELDS
-from skillchain_torch.trainers.config_fields import LEGACY_FIELDS
-from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+from skillchain_torch.trainers.config.cli import _config_from_args, build_parser, main
+from skillchain_torch.trainers.config.config import PRESET_CONFIG_FIELDS, UNREAD_FIELDS
+from skillchain_torch.trainers.config.fields import LEGACY_FIELDS
 
 ROOT = Path(__file__).resolve().parents[2]
 BOX = ["--map", "pinball_box", "--max-episode-steps", "300", "--quiet"]

@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 import torch
 
+from skillchain_torch.agents.given_options import load_given_options
 from skillchain_torch.options import OptionBank, OptionStatus
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
-from skillchain_torch.trainers.checkpoint import read_checkpoint
-from skillchain_torch.trainers.cli import main
-from skillchain_torch.trainers.given_options import load_given_options
-from skillchain_torch.trainers.population import Diverged
+from skillchain_torch.trainers.config.cli import main
+from skillchain_torch.trainers.loop.population import Diverged
+from skillchain_torch.trainers.outputs.checkpoint import read_checkpoint
 
 SCRIPT = Path(sys.executable).parent / "skillchain"
 BOX = ["--map", "pinball_box", "--max-episode-steps", "300", "--quiet"]

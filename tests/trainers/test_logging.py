@@ -9,13 +9,13 @@ import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from skillchain_torch.trainers import PopulationTrainer, ProgressBar, TensorBoardHook, TrainConfig
-from skillchain_torch.trainers.logging import population_interval
-from skillchain_torch.trainers.plots import learning_curve, save_learning_curve
+from skillchain_torch.trainers.outputs.logging import population_interval
+from skillchain_torch.trainers.outputs.plots import learning_curve, save_learning_curve
 from skillchain_torch.trainers.study.summary import summarize
 
 
 def test_doctests():
-    for name in ("logging", "progress"):
+    for name in ("outputs.logging", "outputs.progress"):
         module = importlib.import_module(f"skillchain_torch.trainers.{name}")
         assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 

@@ -13,7 +13,7 @@ from skillchain_torch.agents.region_option import make_region_option
 from skillchain_torch.envs.pinball import load_map
 from skillchain_torch.options import InitiationClassifier, LambdaEvent, OptionBank, OptionStatus
 from skillchain_torch.trainers import PopulationTrainer, TensorBoardHook, TrainConfig
-from skillchain_torch.trainers.option_monitor import (
+from skillchain_torch.trainers.outputs.option_monitor import (
     VELOCITIES,
     OptionMonitor,
     SlotMemo,
@@ -28,7 +28,7 @@ from skillchain_torch.trainers.option_monitor import (
 X, Y, XD, X2, Y2 = 1, 2, 3, 5, 9
 
 
-@pytest.mark.parametrize("name", ["option_monitor", "initiation_images"])
+@pytest.mark.parametrize("name", ["outputs.option_monitor", "outputs.initiation_images"])
 def test_doctests(name):
     module = importlib.import_module(f"skillchain_torch.trainers.{name}")
     assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0

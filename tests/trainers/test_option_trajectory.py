@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
-from skillchain_torch.trainers.option_trajectory import (
+from skillchain_torch.trainers.outputs.option_trajectory import (
     _replay,
     best_greedy_trajectory,
     greedy_trajectories,

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
-from skillchain_torch.trainers.blocks import ShardedRun, block_spans
-from skillchain_torch.trainers.cli import main
-from skillchain_torch.trainers.distributed import run_sharded
+from skillchain_torch.trainers.config.cli import main
+from skillchain_torch.trainers.distributed.blocks import ShardedRun, block_spans
+from skillchain_torch.trainers.distributed.ray_runs import run_sharded
 
 TINY = dict(runs=4, episodes=3, max_episode_steps=200, seed=3)
 
@@ -148,7 +148,7 @@ def test_interrupted_driver_then_resume(ray_local, tmp_path):
     out = tmp_path / "run"
     address = ray_local.get_runtime_context().gcs_address
     driver = subprocess.Popen(
-        [sys.executable, "-m", "skillchain_torch.trainers.cli", "train", *_flags(**fields),
+        [sys.executable, "-m", "skillchain_torch.trainers.config.cli", "train", *_flags(**fields),
          "--out", str(out), "--workers", "2", "--block-size", "1", "--quiet", "--ray-address",
          address], stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 300
@@ -194,7 +194,7 @@ def test_sharding_flags_are_checked(tmp_path, capsys, argv, message):
 @pytest.mark.parametrize("runs", [1, 2, 7, 30, 100])
 @pytest.mark.parametrize("workers", [1, 2, 3, 16])
 def test_shrinking_blocks_cover_every_agent_once(runs, workers):
-    from skillchain_torch.trainers.blocks import guided_spans
+    from skillchain_torch.trainers.distributed.blocks import guided_spans
 
     spans = guided_spans(runs, workers)
     assert [a for a, _ in spans] == [0] + [b for _, b in spans[:-1]] and spans[-1][1] == runs
@@ -202,7 +202,8 @@ def test_shrinking_blocks_cover_every_agent_once(runs, workers):
     assert sizes == sorted(sizes, reverse=True) and sizes[-1] == 1
 
 
-@pytest.mark.parametrize("name", ["blocks", "block_run", "block_merge", "distributed"])
+@pytest.mark.parametrize("name", ["distributed.blocks", "distributed.block_run",
+                                  "distributed.block_merge", "distributed.ray_runs"])
 def test_doctests(name):
     import doctest
     import importlib
@@ -214,7 +215,7 @@ def test_doctests(name):
 def test_default_blocks_are_one_per_worker_and_shrink_is_guided():
     """Measured on an idle machine, batching beats balancing (benchmarks/README.md): by default
     each worker takes one block; ``shrink`` is the guided schedule."""
-    from skillchain_torch.trainers.blocks import guided_spans, plan_blocks
+    from skillchain_torch.trainers.distributed.blocks import guided_spans, plan_blocks
 
     assert plan_blocks(100, 2) == [(0, 50), (50, 100)]
     assert plan_blocks(7, 3) == [(0, 3), (3, 6), (6, 7)]

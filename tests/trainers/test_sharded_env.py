@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from skillchain_torch.trainers import TrainConfig
-from skillchain_torch.trainers.block_merge import merge_blocks, run_wall_time
-from skillchain_torch.trainers.block_run import run_block
-from skillchain_torch.trainers.blocks import ShardedRun, block_config
+from skillchain_torch.trainers.distributed.block_merge import merge_blocks, run_wall_time
+from skillchain_torch.trainers.distributed.block_run import run_block
+from skillchain_torch.trainers.distributed.blocks import ShardedRun, block_config
 
 
 def test_sharded_env_skill_chaining_run_merges(tmp_path: Path):

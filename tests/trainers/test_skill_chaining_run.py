@@ -12,9 +12,9 @@ from skillchain_torch.agents import SkillChainingAgent
 from skillchain_torch.backends import hierarchical as native_hierarchical
 from skillchain_torch.options import OptionBank, OptionStatus
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
-from skillchain_torch.trainers.checkpoint import load_checkpoint
-from skillchain_torch.trainers.cli import main
-from skillchain_torch.trainers.discovery_log import DiscoveryLog, option_tree
+from skillchain_torch.trainers.config.cli import main
+from skillchain_torch.trainers.outputs.checkpoint import load_checkpoint
+from skillchain_torch.trainers.outputs.discovery_log import DiscoveryLog, option_tree
 
 # pinball_box: an open box where random play finds the hole within a few hundred steps, so
 # agents create options in their first episodes, at different episodes.
@@ -161,7 +161,7 @@ def test_discovery_log_registered_after_loading_gets_its_state(tmp_path):
 
 
 def test_given_options_drop_gestating_slots_and_keep_out_of_parents(tmp_path):
-    from skillchain_torch.trainers.given_options import GivenOptionsAgent
+    from skillchain_torch.agents.given_options import GivenOptionsAgent
 
     bank = OptionBank.build(1, 3, seed=0)
     one = torch.tensor([True])
@@ -184,7 +184,7 @@ def test_given_options_drop_gestating_slots_and_keep_out_of_parents(tmp_path):
 
 
 def test_initiation_reading_reaches_the_classifiers():
-    from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+    from skillchain_torch.agents.skill_chaining_run import SkillChainingRunAgent
 
     config = TrainConfig(runs=2, initiation_bias=2.5, initiation_centered=True, **BOX)
     classifier = SkillChainingRunAgent(config).bank.classifier
@@ -195,7 +195,7 @@ def test_initiation_reading_reaches_the_classifiers():
 
 
 def test_gestation_and_convergence_reach_the_discovery_rules():
-    from skillchain_torch.trainers.skill_chaining import SkillChainingRunAgent
+    from skillchain_torch.agents.skill_chaining_run import SkillChainingRunAgent
 
     default = SkillChainingRunAgent(TrainConfig(runs=1, **BOX)).discovery
     assert (default.gestation, default.convergence.threshold) == (2, 0.15)

@@ -17,7 +17,7 @@ def _run(runs, seed, native=None, **kwargs):
 
 
 def test_doctests():
-    for name in ("population", "study", "study.summary", "plots"):
+    for name in ("loop.population", "study", "study.summary", "outputs.plots", "config.registry"):
         module = importlib.import_module(f"skillchain_torch.trainers.{name}")
         assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 

@@ -72,7 +72,7 @@ def test_readme_snippet_runs_and_writes_what_the_cli_writes(tmp_path):
 def test_a_diverged_user_agent_gets_advice_for_python_and_its_own_record(tmp_path):
     """The divergence advice names no flag (no flag set the user's step sizes), and
     diverged.json records the user's agent, not the config's."""
-    from skillchain_torch.trainers.population import Diverged
+    from skillchain_torch.trainers.loop.population import Diverged
 
     agent = SkillChainingAgent(OptionBank.build(2, 2, order=1), order=1)
     trainer = PopulationTrainer(TrainConfig(runs=2, episodes=3, max_episode_steps=30,

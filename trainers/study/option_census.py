@@ -26,8 +26,7 @@ import numpy as np
 import torch
 
 from skillchain_torch.options import OptionBank
-
-from ..option_monitor import probe_observations
+from skillchain_torch.trainers.outputs.option_monitor import probe_observations
 
 __all__ = ["census", "dead_agents", "main"]
 

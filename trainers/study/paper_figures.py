@@ -25,7 +25,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..option_trajectory import OPTION_COLORS, _single_agent, greedy_trajectory
+from skillchain_torch.trainers.outputs.option_trajectory import (
+    OPTION_COLORS,
+    _single_agent,
+    greedy_trajectory,
+)
 
 __all__ = ["plot_curves", "load_trained", "trained_agents", "good_solutions", "solution_figure",
            "option_rollout", "initiation_figure", "AGENT_COLORS"]  # fmt: skip
@@ -49,7 +53,7 @@ def _save(fig, path, title: str, dpi: int) -> Path:
 def plot_curves(returns: dict, ax=None, title: str | None = None, smooth: int = 1):
     """Each ``returns[name] [runs, episodes]`` as a mean curve with a 95% band (mean +- t sd /
     sqrt(runs), Student's t), optionally averaged over ``smooth`` episodes."""
-    from ..plots import learning_curve
+    from skillchain_torch.trainers.outputs.plots import learning_curve
 
     if ax is None:
         import matplotlib.pyplot as plt
@@ -81,10 +85,10 @@ def load_trained(run_dir: str | Path):
     ``skillchain verify`` does); the checkpoint is loaded with that path in its config."""
     import dataclasses
 
-    from ..checkpoint import latest_checkpoint, read_checkpoint
-    from ..config import TrainConfig
-    from ..population import PopulationTrainer
-    from .verify import resolve_options_path
+    from skillchain_torch.trainers.config.config import TrainConfig
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint, read_checkpoint
+    from skillchain_torch.trainers.study.verify import resolve_options_path
 
     run_dir = Path(run_dir)
     config = TrainConfig.load_json(run_dir / "config.json")
@@ -116,7 +120,7 @@ def trained_agents(run_dir: str | Path):
     """
     import json
 
-    from ..checkpoint import latest_checkpoint
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint
 
     run_dir = Path(run_dir)
     sharding = run_dir / "sharding.json"
@@ -164,7 +168,7 @@ def solution_figure(runs: list[dict], map_name: str, path: str | Path, title: st
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..option_trajectory import plot_option_trajectory
+    from skillchain_torch.trainers.outputs.option_trajectory import plot_option_trajectory
 
     fig, axes = plt.subplots(1, len(runs), figsize=(5 * len(runs), 5), squeeze=False)
     for ax, run in zip(axes[0], runs):
@@ -212,8 +216,7 @@ def initiation_figure(agent, runs: list[dict], map_name: str, path: str | Path,
     import matplotlib.pyplot as plt
 
     from skillchain_torch.envs.pinball import load_map
-
-    from ..option_monitor import plot_initiation_set
+    from skillchain_torch.trainers.outputs.option_monitor import plot_initiation_set
 
     pinball_map = load_map(map_name)
     used = []

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .intervals import diff_ci, mean_ci
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
 
 __all__ = ["window", "sd_ratio_ci", "check_claims", "write_report", "WINDOWS"]
 
@@ -238,7 +238,7 @@ def _figures(out: Path, instance: str, runs: dict, quiet: bool) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .paper_figures import (
+    from skillchain_torch.trainers.study.paper_figures import (
         good_solutions,
         initiation_figure,
         plot_curves,

@@ -49,7 +49,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..config import TrainConfig
+from skillchain_torch.trainers.config.config import TrainConfig
 
 __all__ = ["Experiment", "paper_experiments", "run_state", "run_experiments", "train_dir",
            "experiment_spans", "INSTANCES"]  # fmt: skip
@@ -107,7 +107,7 @@ def paper_experiments(runs: int = 100, episodes: int = 250, hard_runs: int = 100
 def run_state(run_dir: Path) -> str:
     """``"done"`` (``run_info.json`` written), ``"partial"`` (a checkpoint to resume from) or
     ``"new"``."""
-    from ..checkpoint import latest_checkpoint
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint
 
     if (run_dir / "run_info.json").is_file() and (run_dir / "returns.npy").is_file():
         return "done"
@@ -131,10 +131,10 @@ def train_dir(run_dir: str | Path, quiet: bool = True, threads: int = 1) -> int:
     """Train the run described by ``run_dir/config.json``: continue it from its last checkpoint
     if it has one, else start it; nothing if it is done. The exit code of ``skillchain train``.
     """
-    from ..checkpoint import latest_checkpoint, load_checkpoint
-    from ..cli import _run
-    from ..out_dir import _prepare_out
-    from ..population import PopulationTrainer
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint, load_checkpoint
+    from skillchain_torch.trainers.outputs.out_dir import _prepare_out
+    from skillchain_torch.trainers.outputs.run_outputs import train_and_write
 
     run_dir = Path(run_dir)
     state = run_state(run_dir)
@@ -152,7 +152,7 @@ def train_dir(run_dir: str | Path, quiet: bool = True, threads: int = 1) -> int:
         saved = (run_dir / "config.json").read_text()
         _prepare_out(_Parser(), run_dir, overwrite=True)
         (run_dir / "config.json").write_text(saved)
-    return _run(trainer, run_dir, quiet=quiet)
+    return train_and_write(trainer, run_dir, quiet)  # (what the CLI's _run does, unparsed)
 
 
 def experiment_spans(runs: int, jobs: int) -> list[tuple[int, int]]:
@@ -163,7 +163,7 @@ def experiment_spans(runs: int, jobs: int) -> list[tuple[int, int]]:
         >>> experiment_spans(100, 2), experiment_spans(3, 2), experiment_spans(1, 2)
         ([(0, 50), (50, 100)], [(0, 2), (2, 3)], [(0, 1)])
     """
-    from ..blocks import block_spans
+    from skillchain_torch.trainers.distributed.blocks import block_spans
 
     return block_spans(runs, -(-runs // max(1, min(jobs, runs))))
 
@@ -198,8 +198,8 @@ def _launch(out: Path, job: _Job, wall: float = 0.0, jobs: int = 2) -> subproces
 
 def _jobs_of(exp: Experiment, out: Path, jobs: int) -> list[_Job]:
     """What is left to do for ``exp`` (not done): its unfinished blocks, or its merge."""
-    from ..blocks import DONE, SHARDING, ShardedRun
-    from ..checkpoint import latest_checkpoint
+    from skillchain_torch.trainers.distributed.blocks import DONE, SHARDING, ShardedRun
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint
 
     run_dir = out / exp.name
     if not (run_dir / SHARDING).is_file() and latest_checkpoint(run_dir) is not None:
@@ -218,7 +218,7 @@ def _jobs_of(exp: Experiment, out: Path, jobs: int) -> list[_Job]:
 
 
 def _finished(job: _Job, out: Path, code: int) -> bool:
-    from ..blocks import DONE
+    from skillchain_torch.trainers.distributed.blocks import DONE
 
     if job.kind == "block":
         a, b = job.span
@@ -246,7 +246,7 @@ def run_experiments(experiments: list[Experiment], out: str | Path, jobs: int = 
     done)."""
     from tqdm import tqdm
 
-    from ..blocks import record_driver_wall
+    from skillchain_torch.trainers.distributed.blocks import record_driver_wall
 
     out = Path(out)
     for exp in experiments:  # refuse a mismatch before anything starts
@@ -350,7 +350,7 @@ def reproduce_paper(out: str | Path, runs: int = 100, episodes: int = 250, hard_
         indent=1) + "\n")  # fmt: skip
     run_experiments(exps, out, jobs=jobs, quiet=quiet)
     if report:
-        from .paper_report import write_report
+        from skillchain_torch.trainers.study.paper_report import write_report
 
         return write_report(out, [e.name for e in exps], quiet=quiet)
     return out
@@ -361,9 +361,9 @@ def _job_main(argv: list[str] | None = None) -> int:
     ``RUN`` (an older study's one-process run), ``RUN --block a-b`` or ``RUN --merge``."""
     import argparse
 
-    from ..block_merge import merge_blocks
-    from ..block_run import run_block
-    from ..blocks import DONE, ShardedRun, block_config
+    from skillchain_torch.trainers.distributed.block_merge import merge_blocks
+    from skillchain_torch.trainers.distributed.block_run import run_block
+    from skillchain_torch.trainers.distributed.blocks import DONE, ShardedRun, block_config
 
     parser = argparse.ArgumentParser(prog="python -m skillchain_torch.trainers.study.reproduce")
     parser.add_argument("run")

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import UNREAD_FIELDS, TrainConfig
+from skillchain_torch.trainers.config.config import UNREAD_FIELDS, TrainConfig
 
 __all__ = ["load_spec", "expand_grid", "cell_complete", "summary_table", "run_sweep"]
 
@@ -157,8 +157,8 @@ def summary_table(cells: list[tuple[str, np.ndarray]], windows) -> str:
         ...                     [(1, 2)]).splitlines()[0])
         | cell | runs | episodes 1-2 | 1-2 vs a |
     """
-    from .intervals import diff_ci, mean_ci
-    from .paper_report import window
+    from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
+    from skillchain_torch.trainers.study.paper_report import window
 
     first_name, first = cells[0]
     head = ["cell", "runs"] + [f"episodes {a}-{b}" for a, b in windows]
@@ -183,7 +183,7 @@ def save_sweep_figure(cells: list[tuple[str, np.ndarray]], path: Path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from ..plots import plot_learning_curve
+    from skillchain_torch.trainers.outputs.plots import plot_learning_curve
 
     fig = Figure(figsize=(8, 5))
     FigureCanvasAgg(fig)
@@ -209,8 +209,8 @@ def run_sweep(spec_path: str | Path, out: str | Path | None = None, workers: int
     """
     import os
 
-    from ..blocks import ShardedRun, plan_blocks
-    from ..distributed import run_sharded
+    from skillchain_torch.trainers.distributed.blocks import ShardedRun, plan_blocks
+    from skillchain_torch.trainers.distributed.ray_runs import run_sharded
 
     spec = load_spec(spec_path)
     cells = expand_grid(spec, str(spec_path))

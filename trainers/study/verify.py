@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import TrainConfig
+from skillchain_torch.trainers.config.config import TrainConfig
 
 __all__ = ["verify_run", "resolve_options_path"]
 
@@ -79,7 +79,7 @@ def verify_run(run_dir: str | Path, agents, native: bool | None = None,
     given-options run's options are rebuilt). ``ValueError`` names a missing file or an agent
     outside the run.
     """
-    from ..population import PopulationTrainer
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
 
     run_dir = Path(run_dir)
     for name in ("config.json", "returns.npy", "lengths.npy"):

@@ -17,8 +17,8 @@ import time
 import numpy as np
 
 import skillchain_torch.agents.pieces as pieces
-from skillchain_torch.trainers.config import TrainConfig
-from skillchain_torch.trainers.population import PopulationTrainer
+from skillchain_torch.trainers.config.config import TrainConfig
+from skillchain_torch.trainers.loop.population import PopulationTrainer
 
 TU = int(os.environ.get("TU", "250"))
 LR = float(os.environ.get("LR", "1e-3"))

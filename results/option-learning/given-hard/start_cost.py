@@ -40,8 +40,8 @@ sys.path.insert(0, str(ROOT / "results" / "option-learning"))  # execution_ends
 from execution_ends import KINDS as END_KINDS  # noqa: E402
 from execution_ends import end_kinds  # noqa: E402
 
-from trainers.config import TrainConfig  # noqa: E402
-from trainers.population import PopulationTrainer  # noqa: E402
+from skillchain_torch.trainers.config.config import TrainConfig  # noqa: E402
+from skillchain_torch.trainers.loop.population import PopulationTrainer  # noqa: E402
 
 KINDS = ("option", "primitive_covered", "primitive_uncovered")
 # execution_ends.KINDS under this script's names (terminated and truncated: one episode end)

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skillchain_torch.trainers.config import TrainConfig
-from skillchain_torch.trainers.population import PopulationTrainer
+from skillchain_torch.trainers.config.config import TrainConfig
+from skillchain_torch.trainers.loop.population import PopulationTrainer
 
 run, agent, episode = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 cfg = TrainConfig.load_json(f"{run}/config.json").resolved()

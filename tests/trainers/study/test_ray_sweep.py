@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
-from skillchain_torch.trainers.cli import main
+from skillchain_torch.trainers.config.cli import main
 from skillchain_torch.trainers.study.sweep import expand_grid
 
 SPEC = """

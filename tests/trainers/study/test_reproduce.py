@@ -11,7 +11,7 @@ import pytest
 
 
 def skillchain(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "skillchain_torch.trainers.cli", *args],
+    return subprocess.run([sys.executable, "-m", "skillchain_torch.trainers.config.cli", *args],
                           capture_output=True, text=True, cwd=cwd, timeout=600)  # fmt: skip
 
 
@@ -58,9 +58,9 @@ def test_reproduce_resumes_and_its_runs_verify(tmp_path):
 def test_figures_take_the_trained_agents_of_a_sharded_run_from_a_block(tmp_path):
     """A run sharded on Ray keeps its checkpoints in its blocks: the figures take the block
     whose agents hold the most options and label its agents by their place in the run."""
-    from skillchain_torch.trainers.block_run import run_block
-    from skillchain_torch.trainers.blocks import block_config
-    from skillchain_torch.trainers.config import TrainConfig
+    from skillchain_torch.trainers.config.config import TrainConfig
+    from skillchain_torch.trainers.distributed.block_run import run_block
+    from skillchain_torch.trainers.distributed.blocks import block_config
     from skillchain_torch.trainers.study.paper_figures import load_trained, trained_agents
 
     cfg = TrainConfig(agent="skill-chaining", map="pinball_box", runs=3, episodes=3, seed=11,

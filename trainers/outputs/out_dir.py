@@ -17,7 +17,7 @@ import os
 import shutil
 from pathlib import Path
 
-from .run_outputs import OUTPUTS
+from skillchain_torch.trainers.outputs.run_outputs import OUTPUTS
 
 __all__ = ["_check_out", "_fail", "_prepare_out", "_remove_created", "_remove_outputs"]
 

@@ -33,10 +33,10 @@ from __future__ import annotations
 import os
 import time
 
-from .block_merge import merge_blocks
-from .block_run import run_block
-from .blocks import ShardedRun, block_config
-from .run_outputs import source_commit
+from skillchain_torch.trainers.distributed.block_merge import merge_blocks
+from skillchain_torch.trainers.distributed.block_run import run_block
+from skillchain_torch.trainers.distributed.blocks import ShardedRun, block_config
+from skillchain_torch.trainers.outputs.run_outputs import source_commit
 
 __all__ = ["require_ray", "run_sharded", "RAY_MISSING"]
 

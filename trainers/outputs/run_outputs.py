@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from .user_agent import agent_label
+from skillchain_torch.trainers.loop.user_agent import agent_label
 
 __all__ = ["OUTPUTS", "train_and_write", "source_commit", "write_discovery"]
 
@@ -44,7 +44,7 @@ OUTPUTS = (
 
 def _interrupted(out: Path, every: int, user_agent: bool = False) -> str:
     """What to do after Ctrl-C: resume from a checkpoint, or start again if none was written."""
-    from .checkpoint import latest_checkpoint
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint
 
     if user_agent:  # built in Python: the command line cannot rebuild it
         return (f"\ninterrupted; continue in Python: resume_checkpoint({str(out)!r}, "
@@ -70,16 +70,16 @@ def train_and_write(trainer, out: str | Path, quiet: bool = False) -> int:
     """
     import torch
 
-    from .logging import TensorBoardHook
-    from .plots import save_learning_curve
-    from .progress import ProgressBar
+    from skillchain_torch.trainers.outputs.logging import TensorBoardHook
+    from skillchain_torch.trainers.outputs.plots import save_learning_curve
+    from skillchain_torch.trainers.outputs.progress import ProgressBar
 
     out = Path(out)
     tb = TensorBoardHook.for_run(trainer, out)
     tb.register(trainer)
     discovery = None
     if getattr(trainer.agent, "discovery", None) is not None:
-        from .discovery_log import DiscoveryLog
+        from skillchain_torch.trainers.outputs.discovery_log import DiscoveryLog
 
         discovery = DiscoveryLog(tb.logger)
         discovery.register(trainer)
@@ -185,15 +185,18 @@ def write_discovery(trainer, discovery, out: Path) -> None:
     ``option_tree.json``."""
     import numpy as np
 
-    from .discovery_log import option_tree
-    from .option_trajectory import figure_candidates
+    from skillchain_torch.trainers.outputs.discovery_log import option_tree
+    from skillchain_torch.trainers.outputs.option_trajectory import figure_candidates
 
     trainer.agent.bank.save(out / "options.pt")
     np.save(out / "n_options.npy", discovery.n_options)
     np.save(out / "option_outcomes.npy", discovery.outcomes)
     (out / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent), indent=1) + "\n")
     if trainer.config.env is not None:  # Figure 4b off Pinball: observation dims 0 and 1
-        from .env_trajectory import best_env_trajectory, save_env_trajectory
+        from skillchain_torch.trainers.outputs.env_trajectory import (
+            best_env_trajectory,
+            save_env_trajectory,
+        )
 
         order = figure_candidates(trainer.agent.bank.live().sum(-1).cpu().numpy())
         run = best_env_trajectory(trainer.agent, trainer.config.env, agents=order, tries=1,
@@ -203,7 +206,10 @@ def write_discovery(trainer, discovery, out: Path) -> None:
     # Figure 4b: the best greedy solution through options, among figure_candidates' eight.
     import torch
 
-    from .option_trajectory import best_greedy_trajectory, save_option_trajectory
+    from skillchain_torch.trainers.outputs.option_trajectory import (
+        best_greedy_trajectory,
+        save_option_trajectory,
+    )
 
     order = figure_candidates(trainer.agent.bank.live().sum(-1).cpu().numpy(),
                               trainer.returns[:, -1])  # fmt: skip

@@ -48,11 +48,10 @@ from skillchain_torch.envs.external import make_env, read_specs
 from skillchain_torch.envs.pinball import PinballEnv
 from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
 from skillchain_torch.policies import LinearEpsilon
-
-from .agents import make_agent
-from .config import TrainConfig
-from .env_stepper import EnvStepper
-from .user_agent import agent_label, check_agent, run_record
+from skillchain_torch.trainers.config.config import TrainConfig
+from skillchain_torch.trainers.config.registry import make_agent
+from skillchain_torch.trainers.loop.env_stepper import EnvStepper
+from skillchain_torch.trainers.loop.user_agent import agent_label, check_agent, run_record
 
 __all__ = ["PopulationTrainer", "EpisodeBatch", "STAGES", "Diverged", "DIVERGED_OUTPUTS"]
 
@@ -108,7 +107,8 @@ def _per_agent(module, population: int, names: tuple[str, ...] = ("weight",)) ->
     tensors = [getattr(module, n) for n in names if isinstance(getattr(module, n, None),
                                                                torch.Tensor)]  # fmt: skip
     seen = {id(t) for t in tensors}
-    tensors += [p for p in module.parameters() if p.requires_grad and id(p) not in seen
+    parameters = module.parameters() if hasattr(module, "parameters") else ()
+    tensors += [p for p in parameters if p.requires_grad and id(p) not in seen
                 and p.dim() >= 1 and p.shape[0] == population]  # fmt: skip
     return [t.detach() for t in tensors]
 
@@ -356,7 +356,7 @@ class PopulationTrainer:
         return self.out_dir / "checkpoints" / f"ckpt_{episodes:06d}.pt"
 
     def save_checkpoint(self, path: str | Path | None = None) -> Path:
-        from .checkpoint import save_checkpoint
+        from skillchain_torch.trainers.outputs.checkpoint import save_checkpoint
 
         path = self.checkpoint_path() if path is None else Path(path)
         self.check_learners()  # never a checkpoint of diverged weights
@@ -476,7 +476,8 @@ class PopulationTrainer:
         learners += [
             ("the option Q-heads", advice, heads),
             ("the initiation classifiers",
-             f"their step size (lr {classifier.lr:g}) is not a run parameter",
+             f"their step size (lr {classifier.lr:g}) is not a run parameter"
+             if isinstance(getattr(classifier, "lr", None), float) else "",
              [pick(t) for t in _per_agent(classifier, agent.population, ("weight", "bias"))]),
         ]
         return self._for_user(learners)
@@ -516,7 +517,7 @@ class PopulationTrainer:
         done_text = str(done[0]) if len(done) == 1 else f"{done[0]}-{done[-1]}"
         last = None
         if self.out_dir is not None:
-            from .checkpoint import latest_checkpoint
+            from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint
 
             last = latest_checkpoint(self.out_dir)
         saved = (f"returns so far in {self.out_dir / 'partial_returns.npy'}; last good "

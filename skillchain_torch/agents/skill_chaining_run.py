@@ -17,8 +17,7 @@ from __future__ import annotations
 import torch
 
 from skillchain_torch.agents import SkillChainingAgent
-
-from .config import PRESET_CONFIG_FIELDS, TrainConfig
+from skillchain_torch.trainers.config.config import PRESET_CONFIG_FIELDS, TrainConfig
 
 __all__ = ["SkillChainingRunAgent"]
 

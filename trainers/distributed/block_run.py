@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .blocks import DONE
-from .config import TrainConfig
+from skillchain_torch.trainers.config.config import TrainConfig
+from skillchain_torch.trainers.distributed.blocks import DONE
 
 __all__ = ["run_block"]
 
@@ -58,8 +58,8 @@ def run_block(config: TrainConfig, block_dir: str | Path, threads: int = 1,
     ``crash_once``: a test hook, a marker file; when it does not exist yet, the worker creates
     it and dies right after the block's first checkpoint (as a killed worker would).
     """
-    from .checkpoint import latest_checkpoint, resume_checkpoint
-    from .population import PopulationTrainer
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint, resume_checkpoint
 
     block_dir = Path(block_dir)
     if (block_dir / DONE).is_file():
@@ -71,7 +71,7 @@ def run_block(config: TrainConfig, block_dir: str | Path, threads: int = 1,
     trainer = PopulationTrainer(config, out_dir=block_dir, num_threads=threads, native=native)
     discovery = None
     if getattr(trainer.agent, "discovery", None) is not None:
-        from .discovery_log import DiscoveryLog
+        from skillchain_torch.trainers.outputs.discovery_log import DiscoveryLog
 
         discovery = DiscoveryLog()
         discovery.register(trainer)
@@ -92,7 +92,7 @@ def run_block(config: TrainConfig, block_dir: str | Path, threads: int = 1,
     np.save(block_dir / "returns.npy", trainer.returns)
     np.save(block_dir / "lengths.npy", trainer.lengths)
     if discovery is not None:
-        from .discovery_log import option_tree
+        from skillchain_torch.trainers.outputs.discovery_log import option_tree
 
         trainer.agent.bank.save(block_dir / "options.pt")
         np.save(block_dir / "n_options.npy", discovery.n_options)

@@ -17,7 +17,7 @@ from collections import deque
 
 from tqdm.auto import tqdm
 
-from .user_agent import agent_label
+from skillchain_torch.trainers.loop.user_agent import agent_label
 
 __all__ = ["ProgressBar"]
 

@@ -26,8 +26,8 @@ __all__ = ["AGENTS", "agent_class", "make_agent"]
 
 AGENTS: dict[str, str] = {
     "flat": "skillchain_torch.agents.flat_sarsa:FlatSarsaAgent",
-    "given-options": "given_options:GivenOptionsAgent",
-    "skill-chaining": "skill_chaining:SkillChainingRunAgent",
+    "given-options": "skillchain_torch.agents.given_options:GivenOptionsAgent",
+    "skill-chaining": "skillchain_torch.agents.skill_chaining_run:SkillChainingRunAgent",
 }
 
 

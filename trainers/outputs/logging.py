@@ -29,9 +29,9 @@ import numpy as np
 from torch.utils.tensorboard.summary import hparams
 from torchrl.record.loggers import TensorboardLogger
 
-from .plots import t95
-from .timed import TimedHook
-from .user_agent import agent_label, run_record
+from skillchain_torch.trainers.loop.user_agent import agent_label, run_record
+from skillchain_torch.trainers.outputs.plots import t95
+from skillchain_torch.trainers.outputs.timed import TimedHook
 
 __all__ = ["TensorBoardHook", "population_interval", "experiment_name", "log_population_arrays"]
 
@@ -138,7 +138,7 @@ class TensorBoardHook(TimedHook):
         trainer.register_op("post_episodes", self.post_episodes, name=name)
         trainer.register_op("post_train", self.post_train, name=name)
         if self.options and getattr(trainer.agent, "bank", None) is not None:
-            from .option_monitor import OptionMonitor
+            from skillchain_torch.trainers.outputs.option_monitor import OptionMonitor
 
             self.option_monitor = OptionMonitor(self.logger)
             self.option_monitor.register(trainer, name=f"{name}_options")

@@ -23,7 +23,9 @@ __all__ = ["learning_curve", "plot_learning_curve", "save_learning_curve", "t95"
 def t95(n: int) -> float:
     """Student's two-sided 95% quantile for the mean of ``n`` runs (``t(0.975, n - 1)``; 0 for
     fewer than 2 runs, where no interval exists)."""
-    from .study.intervals import t_quantile  # (the study package imports nothing heavy)
+    from skillchain_torch.trainers.study.intervals import (
+        t_quantile,  # (the study package imports nothing heavy)
+    )
 
     return t_quantile(0.975, n - 1) if n > 1 else 0.0
 

@@ -40,8 +40,7 @@ import torch
 
 from skillchain_torch.discovery.skill_chaining import OUTCOMES
 from skillchain_torch.options import OptionStatus
-
-from .timed import TimedHook
+from skillchain_torch.trainers.outputs.timed import TimedHook
 
 __all__ = ["DiscoveryLog", "option_tree"]
 
@@ -139,7 +138,10 @@ class DiscoveryLog(TimedHook):
             log("discovery/timeout_rate", float(ended[1] / ended.sum()), step=episode)
 
     def _image(self, agent, event) -> None:
-        from .initiation_images import initiation_density, initiation_image
+        from skillchain_torch.trainers.outputs.initiation_images import (
+            initiation_density,
+            initiation_image,
+        )
 
         density = initiation_density(agent.bank, event.agent, event.slot, self.image_resolution)
         image = initiation_image(density, self._map)

@@ -26,8 +26,11 @@ import numpy as np
 import torch
 
 from skillchain_torch.envs.external import make_env, read_specs
-
-from .option_trajectory import OPTION_COLORS, _frozen_agents, solution_rank
+from skillchain_torch.trainers.outputs.option_trajectory import (
+    OPTION_COLORS,
+    _frozen_agents,
+    solution_rank,
+)
 
 __all__ = ["env_trajectory", "best_env_trajectory", "plot_env_trajectory",
            "save_env_trajectory"]  # fmt: skip

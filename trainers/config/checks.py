@@ -141,7 +141,7 @@ def check_values(config) -> None:
     from skillchain_torch.agents.pieces import INITIATIONS, OPTION_HEADS, TOP_HEADS
     from skillchain_torch.discovery.gestation import POLICY_STARTS, VALUE_STARTS
     from skillchain_torch.envs.pinball import MAP_NAMES
-    from skillchain_torch.trainers.agents import AGENTS
+    from skillchain_torch.trainers.config.registry import AGENTS
 
     preset = preset_named(config.preset)
     for field in dataclasses.fields(config):

@@ -39,8 +39,7 @@ from pathlib import Path
 import torch
 
 from skillchain_torch.options.io import content_digest, read_torch_file
-
-from .config import TrainConfig
+from skillchain_torch.trainers.config.config import TrainConfig
 
 __all__ = ["FORMAT_VERSION", "save_checkpoint", "read_checkpoint", "load_checkpoint",
            "latest_checkpoint", "resume_checkpoint", "payload_digest", "DamagedCheckpoint"]

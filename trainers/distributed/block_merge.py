@@ -8,7 +8,7 @@ and for skill chaining ``options.pt``, ``n_options.npy``, ``option_tree.json`` a
 
 Example:
     >>> import tempfile
-    >>> from skillchain_torch.trainers.block_run import run_block
+    >>> from skillchain_torch.trainers.distributed.block_run import run_block
     >>> config = TrainConfig(map="pinball_box", runs=3, episodes=1, max_episode_steps=20)
     >>> run = ShardedRun(config, Path(tempfile.mkdtemp()), [(0, 2), (2, 3)])
     >>> records = {span: run_block(block_config(config, *span, run.block_dir(span)),
@@ -27,8 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .blocks import ShardedRun, block_config, previous_driver_wall
-from .config import TrainConfig
+from skillchain_torch.trainers.config.config import TrainConfig
+from skillchain_torch.trainers.distributed.blocks import (
+    ShardedRun,
+    block_config,
+    previous_driver_wall,
+)
 
 __all__ = ["merge_blocks", "block_trajectory", "run_wall_time"]
 
@@ -61,8 +65,8 @@ def merge_blocks(run: ShardedRun, records: dict, workers: int, wall: float,
 
     import torch
 
-    from .plots import save_learning_curve
-    from .run_outputs import source_commit
+    from skillchain_torch.trainers.outputs.plots import save_learning_curve
+    from skillchain_torch.trainers.outputs.run_outputs import source_commit
 
     cfg, out = run.config, run.out
     dirs = [run.block_dir(s) for s in run.spans]
@@ -124,12 +128,15 @@ def _option_trajectory(run: ShardedRun, returns: np.ndarray) -> None:
     candidates replayed on a worker from its block's last checkpoint; off Pinball, the two
     that hold the most, read from their checkpoints (:func:`block_env_trajectory`)."""
     from skillchain_torch.options import OptionBank
-
-    from .option_trajectory import figure_candidates, save_option_trajectory, solution_rank
+    from skillchain_torch.trainers.outputs.option_trajectory import (
+        figure_candidates,
+        save_option_trajectory,
+        solution_rank,
+    )
 
     held = OptionBank.load(run.out / "options.pt").live().sum(-1).numpy()
     if run.config.env is not None:  # off Pinball, as the one-process run
-        from .env_trajectory import save_env_trajectory
+        from skillchain_torch.trainers.outputs.env_trajectory import save_env_trajectory
 
         candidates = [block_env_trajectory(run, p) for p in figure_candidates(held)]
         save_env_trajectory(max(candidates, key=solution_rank),
@@ -159,9 +166,9 @@ def block_trajectory(config: TrainConfig, block_dir: str | Path, agent: int,
     """The Figure 4b candidates of agent ``agent`` of a finished block (its greedy and
     epsilon-greedy episodes, :func:`~.option_trajectory.best_greedy_trajectory`), rebuilt from
     the block's last checkpoint; ``agent`` in the result is the run's index (+ ``offset``)."""
-    from .checkpoint import resume_checkpoint
-    from .option_trajectory import best_greedy_trajectory
-    from .population import PopulationTrainer
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
+    from skillchain_torch.trainers.outputs.checkpoint import resume_checkpoint
+    from skillchain_torch.trainers.outputs.option_trajectory import best_greedy_trajectory
 
     trainer = PopulationTrainer(config, out_dir=block_dir)
     resume_checkpoint(block_dir, trainer)
@@ -173,9 +180,9 @@ def block_env_trajectory(run: ShardedRun, p: int) -> dict:
     """Agent ``p``'s greedy episode in a fresh copy of the run's env (Figure 4b off Pinball),
     from the agent state of its block's last checkpoint: a Gymnasium env's simulator state is
     not saved, so the block cannot be resumed, but its agents can be read."""
-    from .checkpoint import latest_checkpoint, read_checkpoint
-    from .env_trajectory import best_env_trajectory
-    from .population import PopulationTrainer
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint, read_checkpoint
+    from skillchain_torch.trainers.outputs.env_trajectory import best_env_trajectory
 
     a, b = next(span for span in run.spans if span[0] <= p < span[1])
     block_dir = run.block_dir((a, b))
@@ -192,7 +199,7 @@ def _write_tensorboard(cfg: TrainConfig, out: Path, returns, lengths, n_options)
 
     from torchrl.record.loggers import TensorboardLogger
 
-    from .logging import experiment_name, log_population_arrays
+    from skillchain_torch.trainers.outputs.logging import experiment_name, log_population_arrays
 
     shutil.rmtree(out / "tb", ignore_errors=True)  # a merge redone on --resume: no duplicates
     logger = TensorboardLogger(experiment_name(cfg), log_dir=str(out / "tb"))

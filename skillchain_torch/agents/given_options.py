@@ -26,8 +26,7 @@ from skillchain_torch.agents import HierarchicalAgent
 from skillchain_torch.agents.hierarchical import OBS_DIM
 from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.options import OptionBank, OptionStatus
-
-from .config import TrainConfig
+from skillchain_torch.trainers.config.config import TrainConfig
 
 __all__ = ["GivenOptionsAgent", "load_given_options"]
 
@@ -78,7 +77,7 @@ def _warn_dead(path, saved: OptionBank, index: list[int]) -> None:
     """Log the saved agents whose executable options all have empty initiation sets (on the
     Figure-5 probe grid): the agents given them can never take an option. The paper preset's
     hard-instance banks are all of this kind (sets true everywhere, refitted on timeouts)."""
-    from .study.option_census import dead_agents
+    from skillchain_torch.trainers.study.option_census import dead_agents
 
     executable = saved.executable().any(-1).tolist()
     dead = dead_agents(saved, sorted({a for a in index if executable[a]}))

@@ -16,10 +16,9 @@ import argparse
 from pathlib import Path
 
 from skillchain_torch.presets import PRESET_NAMES
-
-from .agents import AGENTS
-from .arguments_discovery import add_discovery_arguments
-from .arguments_neural import NEURAL_OPTIONS, add_neural_arguments
+from skillchain_torch.trainers.config.arguments_discovery import add_discovery_arguments
+from skillchain_torch.trainers.config.arguments_neural import NEURAL_OPTIONS, add_neural_arguments
+from skillchain_torch.trainers.config.registry import AGENTS
 
 __all__ = ["build_parser", "CONFIG_OPTIONS"]
 

@@ -47,7 +47,7 @@ from torch import Tensor
 from skillchain_torch.options import OptionBank
 
 # The plain functions lived here first; re-exported so that existing imports keep working.
-from .initiation_images import (
+from skillchain_torch.trainers.outputs.initiation_images import (
     VELOCITIES,
     SlotMemo,
     board_masks,

@@ -21,7 +21,7 @@ import dataclasses
 import json
 from pathlib import Path
 
-from .config import TrainConfig
+from skillchain_torch.trainers.config.config import TrainConfig
 
 __all__ = ["SHARDING", "DONE", "guided_spans", "plan_blocks", "block_spans", "block_config",
            "ShardedRun", "record_driver_wall", "previous_driver_wall"]

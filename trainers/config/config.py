@@ -41,8 +41,7 @@ from skillchain_torch.presets import (
     preset_named,
 )
 from skillchain_torch.resources import available_memory
-
-from .config_checks import (
+from skillchain_torch.trainers.config.checks import (
     INT64_MAX,
     ConfigError,
     check_device,
@@ -50,7 +49,13 @@ from .config_checks import (
     check_values,
     memory_estimate,
 )
-from .config_fields import LABEL_FIELDS, LEGACY_FIELDS, MLP_TOP_FIELDS, RESUME_FIELDS, UNREAD_FIELDS
+from skillchain_torch.trainers.config.fields import (
+    LABEL_FIELDS,
+    LEGACY_FIELDS,
+    MLP_TOP_FIELDS,
+    RESUME_FIELDS,
+    UNREAD_FIELDS,
+)
 
 __all__ = ["TrainConfig", "ConfigError", "paper_defaults", "available_memory", "RESUME_FIELDS",
            "LEGACY_FIELDS", "UNREAD_FIELDS", "LABEL_FIELDS", "PRESET_CONFIG_FIELDS", "INT64_MAX"]

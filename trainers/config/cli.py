@@ -25,12 +25,18 @@ import os
 import sys
 from pathlib import Path
 
-from .agents import AGENTS
-from .arguments import CONFIG_OPTIONS, build_parser
-from .config import UNREAD_FIELDS, TrainConfig
-from .config_fields import MLP_TOP_FIELDS
-from .out_dir import _check_out, _fail, _prepare_out, _remove_created, _remove_outputs
-from .run_outputs import source_commit, train_and_write
+from skillchain_torch.trainers.config.arguments import CONFIG_OPTIONS, build_parser
+from skillchain_torch.trainers.config.config import UNREAD_FIELDS, TrainConfig
+from skillchain_torch.trainers.config.fields import MLP_TOP_FIELDS
+from skillchain_torch.trainers.config.registry import AGENTS
+from skillchain_torch.trainers.outputs.out_dir import (
+    _check_out,
+    _fail,
+    _prepare_out,
+    _remove_created,
+    _remove_outputs,
+)
+from skillchain_torch.trainers.outputs.run_outputs import source_commit, train_and_write
 
 __all__ = ["main", "build_parser"]
 
@@ -39,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     command = parser.commands[args.command]  # its errors are one line (arguments.Parser)
     if args.command == "summarize":
-        from .study.summary import summarize_dir
+        from skillchain_torch.trainers.study.summary import summarize_dir
 
         try:
             print(summarize_dir(args.dir))
@@ -56,11 +62,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _reproduce(parser, args) -> int:
-    from .study.reproduce import reproduce_paper
+    from skillchain_torch.trainers.study.reproduce import reproduce_paper
 
     try:
         if args.report_only:
-            from .study.paper_report import write_report
+            from skillchain_torch.trainers.study.paper_report import write_report
 
             path = write_report(args.out, quiet=args.quiet)
         else:
@@ -79,8 +85,8 @@ def _reproduce(parser, args) -> int:
 
 
 def _sweep(parser, args) -> int:
-    from .distributed import require_ray
-    from .study.sweep import run_sweep
+    from skillchain_torch.trainers.distributed.ray_runs import require_ray
+    from skillchain_torch.trainers.study.sweep import run_sweep
 
     try:
         require_ray("skillchain sweep")
@@ -105,7 +111,7 @@ def _sweep(parser, args) -> int:
 
 
 def _verify(parser, args) -> int:
-    from .study.verify import verify_run
+    from skillchain_torch.trainers.study.verify import verify_run
 
     try:
         results = verify_run(args.dir, args.agents, progress=True)
@@ -166,7 +172,7 @@ def _config_from_args(parser, args) -> TrainConfig:
     try:
         config = TrainConfig(**given)
         if config.env is not None:  # its sizes (and so the default order) from its specs
-            from .population import with_env_sizes
+            from skillchain_torch.trainers.loop.population import with_env_sizes
 
             config = with_env_sizes(config)
         return config.validate().resolved()
@@ -199,8 +205,8 @@ MAX_THREADS_PER_CPU = 4
 def _train(parser, args) -> int:
     """Everything is checked (arguments, the saved config, --out, building the agents) before
     anything is written, so a refused command leaves nothing that blocks the corrected one."""
-    from .checkpoint import latest_checkpoint, resume_checkpoint
-    from .population import PopulationTrainer
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint, resume_checkpoint
 
     max_threads = MAX_THREADS_PER_CPU * (os.cpu_count() or 1)
     if args.threads < 1:
@@ -289,7 +295,7 @@ def _check_sharding(parser, args) -> bool:
     if args.resume is None and isinstance(args.block_size, int) and args.block_size > runs > 0:
         parser.error(f"--block-size must be at most --runs ({runs}), got {args.block_size}")
     if sharded or resumed:
-        from .distributed import require_ray
+        from skillchain_torch.trainers.distributed.ray_runs import require_ray
 
         try:
             require_ray("--workers" if sharded else f"--resume {args.resume} (a sharded run)")
@@ -302,8 +308,12 @@ def _train_sharded(parser, args, config, out: Path, native, resume: bool) -> int
     """Train ``config``'s agents in blocks on Ray workers and merge them into ``out``."""
     import time
 
-    from .blocks import ShardedRun, plan_blocks, record_driver_wall
-    from .distributed import run_sharded
+    from skillchain_torch.trainers.distributed.blocks import (
+        ShardedRun,
+        plan_blocks,
+        record_driver_wall,
+    )
+    from skillchain_torch.trainers.distributed.ray_runs import run_sharded
 
     if resume:
         run = ShardedRun.load(out, config)
@@ -345,7 +355,7 @@ def _run(trainer, out: Path, quiet: bool, parser=None, created: Path | None = No
         reason = _write_error(err)
         if reason is None or parser is None:
             raise
-    from .checkpoint import latest_checkpoint
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint
 
     if latest_checkpoint(out) is not None:
         hint = f"; once it can be written, continue with: skillchain train --resume {out}"
