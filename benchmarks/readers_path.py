@@ -9,7 +9,8 @@ already entered and left at most 8 times besides the algorithm's own file. This 
 measures it: it trains a small population (2 agents, ``pinball_simple_single``, seed 0) on the
 torch path everywhere (``native=False`` and
 :func:`~skillchain_torch.backends.select.same_bits_kernels` off) until options exist, then
-traces ``stepper.step`` + ``agent.observe`` for a few population steps with
+traces population steps as the trainer runs them (``trainer.train`` for one more step: its
+loop, the collector, the env step and ``agent.observe``) with
 :func:`sys.settrace` and prints every file of this repository that a Python call entered, in
 the order first entered, with its call count, its role in DESIGN.md's reader's path, and how
 many of its lines the step ran (what a reader must read, against what the file holds); then
@@ -104,16 +105,16 @@ def trace(steps: int, warmup: int):
                              agent="skill-chaining")  # fmt: skip
         trainer = PopulationTrainer(config, native=False)
         trainer.train(max_agent_steps=warmup)
-        action = trainer.agent.actions
         for _ in range(steps):
+            done = int(trainer.episodes_done.sum())
             sys.settrace(tracer)  # calls, and the lines of this repository's frames
             sys.setprofile(profile)  # every call and return: the moves between files
-            obs, reward, ends = trainer.stepper.step(action)
-            if ends is None:
-                action = trainer.agent.observe(obs, reward)
+            # One population step as the trainer runs it: its loop, the collector, the env
+            # and the agent (the limit ends the batch after this step).
+            trainer.train(max_agent_steps=trainer.agent_steps + 1)
             sys.setprofile(None)
             sys.settrace(None)
-            if ends is not None:  # an episode ended: the step above is traced, stop there
+            if int(trainer.episodes_done.sum()) != done:  # an episode ended: stop there
                 break
     return order, calls, lines, sequence
 

@@ -77,6 +77,10 @@ class ActiveEnvStepper:
     def num_active(self) -> int:
         return int(self.index.numel())
 
+    def raw_state(self) -> Tensor:
+        """The active rows' raw states ``[n, 4]`` (a copy: the compiled step steps in place)."""
+        return self._state.clone()
+
     # ------------------------------------------------------------------ episodes
     def start(self) -> Tensor:
         """Reset every environment and make all of them active; observations ``[P, 4]``."""

@@ -1048,9 +1048,8 @@ class SkillChainingAgent(HierarchicalAgent):
         contains, option, value = self.contains, self.option, self.q_decision
         every = self.all_stepped(stepped)  # masks by stepped are then skipped
         executing = option >= 0
-        self.discovery.record_states(stepped, self.obs)
-        self.discovery.record(executing if every else stepped & executing, self.duration,
-                              self.obs)  # fmt: skip
+        self.discovery.record(stepped, executing if every else stepped & executing,
+                              self.duration, self.obs)  # fmt: skip
         info = super().transition(next_obs, reward, terminated, truncated, stepped)
         terminated = as_bool(terminated)
         created = self.discovery.after_transition(

@@ -1,26 +1,58 @@
-"""``HierarchicalCollector``: run a Pinball env with a hierarchical agent, yield transitions.
+"""``HierarchicalCollector``: P agents and their envs stepped together; ``TensorDict`` batches out.
 
-In the spirit of TorchRL's ``Collector`` (iterate, get ``TensorDict`` batches of
-``frames_per_batch`` frames until ``total_frames``), but written for this agent because
-TorchRL's collector does not fit it:
+The loop every trainer of this library runs, in the form of TorchRL's ``Collector``: iterate
+and get ``TensorDict`` batches ``[T, n]`` (``n`` active agents), until every agent has run its
+episodes or ``total_frames`` frames. :class:`~skillchain_torch.trainers.PopulationTrainer`
+iterates one; a script can too.
+
+Why not ``torchrl.collectors.Collector``: it fits a stateless policy over one batch of envs
+that it resets itself, and this one does not fit that:
 
 * a top-level decision spans several environment steps (an option runs until its termination
-  predicate fires), so the policy is not a stateless ``TensorDictModule`` mapping one
-  observation to one action: it needs per-agent option state (the executing slot, its running
-  time, the reward accumulated since the decision) that lives between steps;
+  predicate fires), so the policy is not a ``TensorDictModule`` from one observation to one
+  action: it holds per-agent option state (the executing slot, its running time, the reward
+  accumulated since the decision) between steps;
 * the agent learns *inside* the step (SMDP Sarsa when a decision ends, intra-option
   Q-learning on every transition) and must see episode ends and restarts in order, with
   per-agent random streams that make a population reproduce single runs;
-* TorchRL's collector resets environments itself and calls the policy on the reset output,
-  while the agent's protocol decides the first action of a restarted episode after its last
-  update.
+* agents finish their episodes at different times: a finished agent stops acting and
+  learning, and the batch shrinks to the agents still running (compact rows).
 
-Each batch has batch size ``[T, P]`` (``T = frames_per_batch // P`` steps of the P
-environments) and the keys ``observation``, ``state``, ``action``, ``decision`` (``< 5`` a
-primitive, ``5 + k`` option slot k: the decision in force at this step), ``option`` (slot
-executing now, -1 none), and ``("next", key)`` for ``reward``, ``done``, ``terminated``,
-``truncated`` (``[T, P, 1]``), ``observation`` and ``state``. An ended episode's ``next`` entries
-are its last state; the environment restarts before the following step.
+The collector keeps TorchRL's conventions instead: iteration, ``frames_per_batch`` and
+``total_frames``, ``TensorDict`` batches with the ``("next", ...)`` keys, ``state_dict`` and
+``load_state_dict``.
+
+One step, in order (:meth:`_steps`): the env steps the active agents' actions; each agent's
+return so far takes the reward; the top level's exploration follows its schedule; then either
+``agent.observe`` (no episode ended) or, when some did, the restarts (``stepper.reset``), the
+agent's terminal updates and first decisions (``agent.observe_ends``), and the retirement of
+agents whose last episode just ended (``compact``, env and agent alike).
+
+Keys of a batch (``T`` steps of the ``n`` agents active during it):
+
+====================================  ===============  ========================================
+key                                   shape            meaning
+====================================  ===============  ========================================
+``agent``                             ``[T, n]``       agent id (row ``p`` of a population)
+``observation``                       ``[T, n, D]``    ``s``
+``action``                            ``[T, n]``       the primitive taken at ``s``
+``decision``, ``option``              ``[T, n]``       the top-level decision in force (``< A``:
+                                                       a primitive, ``A + k``: option slot k)
+                                                       and the executing slot (-1 none), for
+                                                       agents that have options
+``("next", "observation")``           ``[T, n, D]``    ``s'`` (an ended episode's last state)
+``("next", "reward")``                ``[T, n, 1]``
+``("next", "done" / "terminated" /    ``[T, n, 1]``    as TorchRL
+"truncated")``
+``("next", "episode_reward")``        ``[T, n, 1]``    the episode's return so far, this step
+                                                       included (TorchRL's ``RewardSum``)
+``("next", "step_count")``            ``[T, n, 1]``    the episode's steps so far
+``state``, ``("next", "state")``      ``[T, n, 4]``    Pinball's raw state (``state=True``)
+====================================  ===============  ========================================
+
+Batches end after ``frames_per_batch // n`` steps, or, with ``frames_per_batch=None``, at every
+step in which an episode ended (what a trainer wants: it records those episodes, runs its hooks
+and writes its checkpoints between batches); the rows of a batch never change inside it.
 
 Example:
     >>> from skillchain_torch.agents import HierarchicalAgent
@@ -35,85 +67,235 @@ Example:
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import torch
 from tensordict import TensorDict
-
-from skillchain_torch.envs.pinball import observation
+from torch import Tensor
 
 __all__ = ["HierarchicalCollector"]
 
 
 class HierarchicalCollector:
-    """Iterate over ``TensorDict`` batches of an env driven by a hierarchical agent.
+    """Iterate over ``TensorDict`` batches of P agents driving their envs.
 
     Args:
-        env: a :class:`~skillchain_torch.envs.pinball.PinballEnv` with ``batch_size [P]``.
-        agent: an agent following the episode protocol (``begin`` / ``observe`` /
-            ``observe_ends``, ``actions``, ``decisions``, ``options``) for the same P, e.g.
-            :class:`~skillchain_torch.agents.HierarchicalAgent`.
-        frames_per_batch: env frames per batch (rounded down to a multiple of P, at least P).
+        env: a :class:`~skillchain_torch.envs.pinball.PinballEnv` with ``batch_size [P]``, or
+            an env stepper (:class:`~skillchain_torch.interfaces.EnvStepper`: Pinball's
+            :class:`~skillchain_torch.envs.pinball.stepper.ActiveEnvStepper`, or
+            :class:`~skillchain_torch.trainers.loop.env_stepper.EnvStepper` over TorchRL envs).
+        agent: P agents following the episode protocol
+            (:class:`~skillchain_torch.interfaces.EpisodeAgent`).
+        frames_per_batch: env frames per batch (``T = frames_per_batch // n``), or ``None``:
+            a batch ends at every step in which an episode ended.
         total_frames: stop after this many frames (``-1``: never).
+        episodes: each agent retires after this many episodes (``None``: never).
+        epsilon: the top level's exploration as a function of the population step
+            (``policies.LinearEpsilon``), set on the agent before each step learns; ``None``
+            leaves the agent's own.
+        state: record Pinball's raw ``state`` (default: when ``env`` is a ``PinballEnv``).
     """
 
-    def __init__(self, env, agent, frames_per_batch: int, total_frames: int = -1):
-        if len(env.batch_size) != 1:
-            raise ValueError(f"env must have batch_size [P], got {tuple(env.batch_size)}")
-        self.env, self.agent = env, agent
-        self.population = env.batch_size[0]
-        self.steps_per_batch = max(1, int(frames_per_batch) // self.population)
-        self.frames_per_batch = self.steps_per_batch * self.population
+    def __init__(self, env, agent, frames_per_batch: int | None = None,
+                 total_frames: int = -1, *, episodes: int | None = None,
+                 epsilon: Callable[[int], float] | None = None,
+                 state: bool | None = None):  # fmt: skip
+        if hasattr(env, "step") and hasattr(env, "reset") and hasattr(env, "num_active"):
+            self.stepper = env  # an env stepper already
+        else:
+            from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
+
+            if len(env.batch_size) != 1:
+                raise ValueError(f"env must have batch_size [P], got {tuple(env.batch_size)}")
+            self.stepper = ActiveEnvStepper(env)
+        self.agent = agent
+        self.population = int(agent.population)
+        self.frames_per_batch = (None if frames_per_batch is None else  # a multiple of P
+                                 max(1, int(frames_per_batch) // self.population) * self.population)
         self.total_frames = int(total_frames)
-        self.frames = 0
-        self._started = False
+        self.episodes, self.epsilon = episodes, epsilon
+        self.state = hasattr(self.stepper, "raw_state") if state is None else bool(state)
+        # The collection's state, declared once (what a checkpoint holds; state_dict).
+        self.started = False
+        self.frames = 0  # agent steps, summed over agents (TorchRL's frames)
+        self.global_step = 0  # population steps (every active agent steps once per step)
+        self.episodes_done = torch.zeros(self.population, dtype=torch.int64)
+        self.max_frames: int | None = None  # a limit for this iteration only (trainer.train)
+        self._ret = torch.zeros(self.population, dtype=torch.float64)  # per active row
+        self._start = torch.zeros(self.population, dtype=torch.int64)  # its episode's start
+        self._obs: Tensor | None = None  # s of each active row
+        self._retired = False  # agents retired at the last episode end (the rows changed)
 
-    def _start(self) -> None:
-        self.agent.begin(self.env.reset_raw())
-        self._started = True
+    # ------------------------------------------------------------------ iteration
+    @property
+    def num_active(self) -> int:
+        return int(self.agent.index.numel())
 
-    def rollout(self) -> TensorDict:
-        """Collect one batch of ``steps_per_batch`` steps (starting the episodes if needed)."""
-        if not self._started:
-            self._start()
-        env, agent = self.env, self.agent
-        P = self.population
-        keys = ("observation", "state", "action", "decision", "option")
-        next_keys = ("observation", "state", "reward", "done", "terminated", "truncated")
-        rows = {k: [] for k in keys}
-        nxt = {k: [] for k in next_keys}
-        all_rows = torch.arange(P, device=env.state.device)
-        for _ in range(self.steps_per_batch):
-            state = env.state
-            rows["state"].append(state)
-            rows["observation"].append(observation(state))
-            action = agent.actions.clone()
-            rows["action"].append(action)
-            rows["decision"].append(agent.decisions.clone())
-            rows["option"].append(agent.options.clone())
-            obs, reward, terminated, truncated = env.step_raw(action)
-            done = terminated | truncated
-            for key, value in (("observation", obs), ("state", env.state), ("reward", reward),
-                               ("done", done), ("terminated", terminated),
-                               ("truncated", truncated)):
-                nxt[key].append(value)
-            if bool(done.any()):
-                restart = all_rows[done]
-                start_obs = env.reset_raw(done)[restart]
-                agent.observe_ends(obs, reward, terminated, truncated, restart, start_obs)
-            else:
-                agent.observe(obs, reward)
-        self.frames += self.frames_per_batch
-        out = {k: torch.stack(v) for k, v in rows.items()}
-        out["next"] = {k: torch.stack(v) for k, v in nxt.items()}
-        for key in ("reward", "done", "terminated", "truncated"):
-            out["next"][key] = out["next"][key][..., None]
-        return TensorDict(out, batch_size=[self.steps_per_batch, P])
+    @property
+    def finished(self) -> bool:
+        return self.started and self.num_active == 0
+
+    def start(self) -> None:
+        """Reset every env and let the agents take their first decisions."""
+        obs = self.stepper.start()
+        self.agent.begin(obs)
+        self._obs = obs
+        device = obs.device
+        self._ret = torch.zeros(self.population, dtype=torch.float64, device=device)
+        self._start = torch.zeros(self.population, dtype=torch.int64, device=device)
+        self.started = True
 
     def __iter__(self) -> Iterator[TensorDict]:
+        if not self.started:
+            self.start()
         while self.total_frames < 0 or self.frames < self.total_frames:
-            yield self.rollout()
+            if self.max_frames is not None and self.frames >= self.max_frames:
+                return
+            index = self.agent.index  # the active agents (a batch's rows never change)
+            if index.numel() == 0:
+                return
+            yield self._steps(index.clone())
+
+    def rollout(self) -> TensorDict:
+        """Collect one batch (starting the episodes if needed)."""
+        return next(iter(self))
+
+    def _steps(self, index: Tensor) -> TensorDict:
+        """Step the active agents ``index`` until the batch ends; the batch ``[T, n]``."""
+        stepper, agent = self.stepper, self.agent
+        n = int(index.numel())
+        limit = self.max_frames if self.max_frames is not None else float("inf")
+        if self.total_frames >= 0:
+            limit = min(limit, self.total_frames)
+        steps = None if self.frames_per_batch is None else max(1, self.frames_per_batch // n)
+        decisions = hasattr(type(agent), "decisions")  # (on the class: no property call)
+        rows: dict[str, list] = {"observation": [], "action": [], "next_observation": [],
+                                 "reward": [], "episode_reward": [], "global_step": [],
+                                 "start": [], "ends": []}
+        if decisions:
+            rows["decision"], rows["option"] = [], []
+        if self.state:
+            rows["state"], rows["next_state"] = [], []
+        action = agent.actions
+        while True:
+            rows["observation"].append(self._obs)
+            rows["action"].append(action.clone())
+            if decisions:
+                rows["decision"].append(agent.decisions)
+                rows["option"].append(agent.options)
+            if self.state:
+                rows["state"].append(stepper.raw_state())
+            obs, reward, ends = stepper.step(action)
+            self._ret = self._ret + reward  # the episode's return so far (a new tensor a step)
+            self.global_step += 1
+            self.frames += n
+            if self.epsilon is not None:
+                agent.epsilon = self.epsilon(self.global_step)
+            rows["next_observation"].append(obs)
+            rows["reward"].append(reward)
+            rows["episode_reward"].append(self._ret)
+            rows["global_step"].append(self.global_step)  # (the episode's steps: at the end)
+            rows["start"].append(self._start)
+            rows["ends"].append(ends)
+            if self.state:
+                rows["next_state"].append(stepper.raw_state())
+            if ends is None:
+                action = agent.observe(obs, reward)
+                self._obs = obs
+                if len(rows["reward"]) == steps or self.frames >= limit:
+                    return self._batch(rows, index)
+                continue
+            self._episode_ends(obs, reward, *ends)
+            if steps is None or len(rows["reward"]) == steps or self._retired \
+                    or self.frames >= limit:  # fmt: skip (rows change: the batch ends here)
+                return self._batch(rows, index)
+            action = agent.actions
+
+    def _episode_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor,
+                      truncated: Tensor) -> None:  # fmt: skip
+        """Restart the rows whose episodes ended (or retire them after their last episode)."""
+        rows = (terminated | truncated).nonzero().flatten()
+        agents = self.agent.index[rows]
+        self.episodes_done[agents.cpu()] += 1
+        if self.episodes is None:
+            finishing = torch.zeros(rows.shape[0], dtype=torch.bool, device=rows.device)
+        else:
+            finishing = (self.episodes_done[agents.cpu()] >= self.episodes).to(rows.device)
+        restart = rows[~finishing]
+        start_obs = self.stepper.reset(restart) if restart.numel() else None
+        self.agent.observe_ends(obs, reward, terminated, truncated, restart, start_obs)
+        self._ret = self._ret.index_fill(0, rows, 0.0)
+        self._start = self._start.index_fill(0, rows, self.global_step)
+        next_obs = obs.clone()
+        if start_obs is not None:
+            next_obs[restart] = start_obs.to(next_obs.dtype)
+        self._obs = next_obs
+        self._retired = bool(finishing.any())
+        if self._retired:
+            keep = torch.ones(terminated.shape[0], dtype=torch.bool, device=rows.device)
+            keep[rows[finishing]] = False
+            self.stepper.compact(keep)
+            self.agent.compact(keep)
+            self._ret, self._start, self._obs = self._ret[keep], self._start[keep], self._obs[keep]
+
+    def _batch(self, rows: dict[str, list], index: Tensor) -> TensorDict:
+        T, n = len(rows["reward"]), int(index.numel())
+        device = rows["reward"][0].device
+        flags = {k: torch.zeros(T, n, 1, dtype=torch.bool, device=device)
+                 for k in ("terminated", "truncated")}  # fmt: skip
+        for t, ends in enumerate(rows["ends"]):
+            if ends is not None:
+                flags["terminated"][t, :, 0], flags["truncated"][t, :, 0] = ends
+        next_obs = torch.stack(rows["next_observation"])
+        if rows["observation"][0] is None:  # resumed without the current observations
+            rows["observation"][0] = torch.full_like(next_obs[0], float("nan"))
+        step = (torch.tensor(rows["global_step"], device=device)[:, None]
+                - torch.stack(rows["start"]))  # fmt: skip
+        nxt = {"observation": next_obs,
+               "reward": torch.stack(rows["reward"])[..., None],
+               "episode_reward": torch.stack(rows["episode_reward"])[..., None],
+               "step_count": step[..., None],
+               "terminated": flags["terminated"], "truncated": flags["truncated"],
+               "done": flags["terminated"] | flags["truncated"]}  # fmt: skip
+        out = {"agent": index.expand(T, n), "observation": torch.stack(rows["observation"]),
+               "action": torch.stack(rows["action"]), "next": nxt}
+        for key in ("decision", "option", "state"):
+            if key in rows:
+                out[key] = torch.stack(rows[key])
+        if self.state:
+            nxt["state"] = torch.stack(rows["next_state"])
+        return TensorDict(out, batch_size=[T, n], device=device)
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self) -> dict:
+        """Progress and every agent's episode so far (``partial_return``/``partial_length``
+        ``[P]``), as a checkpoint holds them."""
+        P, index = self.population, self.agent.index
+        partial_return = torch.zeros(P, dtype=torch.float64)
+        partial_length = torch.zeros(P, dtype=torch.int64)
+        if self.started:
+            partial_return[index.cpu()] = self._ret.cpu()
+            partial_length[index.cpu()] = (self.global_step - self._start).cpu()
+        return {"started": self.started, "global_step": self.global_step,
+                "agent_steps": self.frames, "episodes_done": self.episodes_done.clone(),
+                "partial_return": partial_return, "partial_length": partial_length}
+
+    def load_state_dict(self, state: dict, obs: Tensor | None = None) -> None:
+        """Continue from ``state`` (the agent and the stepper loaded first); ``obs``: the
+        active rows' current observations (default: the agent's own ``obs`` rows)."""
+        self.started = bool(state["started"])
+        self.global_step = int(state["global_step"])
+        self.frames = int(state["agent_steps"])
+        self.episodes_done = torch.as_tensor(state["episodes_done"], dtype=torch.int64).clone()
+        index = self.agent.index
+        device = index.device
+        self._ret = state["partial_return"].to(device)[index].clone()
+        self._start = self.global_step - state["partial_length"].to(device)[index]
+        if obs is None and hasattr(self.agent, "obs"):
+            obs = self.agent.obs[index]
+        self._obs = obs
 
     def __repr__(self) -> str:
         return (f"HierarchicalCollector(population={self.population}, "
-                f"frames_per_batch={self.frames_per_batch}, total_frames={self.total_frames})")
+                f"frames_per_batch={self.frames_per_batch}, total_frames={self.total_frames}, "
+                f"episodes={self.episodes})")

@@ -258,15 +258,13 @@ class SkillChaining:
         if self.recent is not None:
             self.recent.start_episodes(rows)
 
-    def record_states(self, stepped: Tensor, obs: Tensor) -> None:
-        """Before a transition: agents ``stepped [P]`` act in ``obs [P, 4]`` (kept for the
-        gestation positives of the reading; nothing to do without them)."""
+    # ------------------------------------------------------------------ per step
+    def record(self, stepped: Tensor, executing: Tensor, step: Tensor, obs: Tensor) -> None:
+        """Before a transition, discovery's per-step record: agents ``stepped [P]`` act in
+        ``obs [P, 4]`` (kept for the gestation positives of the reading, if it has them), and
+        the ``executing`` ones as step ``step`` of their option's execution (its examples)."""
         if self.recent is not None:
             self.recent.record(stepped, obs)
-
-    # ------------------------------------------------------------------ per step
-    def record(self, executing: Tensor, step: Tensor, obs: Tensor) -> None:
-        """Before a transition: executing agents act in ``obs`` as step ``step`` of it."""
         self.trace.record(executing, step, obs)  # (rows outside executing are skipped)
 
     def start_executions(self, rows: Tensor, slot: Tensor) -> None:

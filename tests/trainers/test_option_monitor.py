@@ -277,3 +277,36 @@ def test_agent_kept_counts_agree_with_counting_every_step():
         for name in a[e]:
             np.testing.assert_array_equal(a[e][name], b[e][name], err_msg=f"{e} {name}")
     assert sum(int(t["executions"].sum()) for t in a.values()) > 0
+
+
+def test_the_logger_reads_the_collectors_batches(tmp_path):
+    """The trainer hands each hook the collector's batch ([T, n] transitions, the option in
+    force at every step); the TensorBoard hook logs the share of agent steps taken inside an
+    option from them, between population points."""
+    make_region_option(examples=200, pretrain_steps=20, batch=20).save(tmp_path / "opt.pt")
+    cfg = TrainConfig(agent="given-options", options=str(tmp_path / "opt.pt"), runs=2,
+                      episodes=3, seed=0, max_episode_steps=150)
+    trainer = PopulationTrainer(cfg, out_dir=None)
+    hook = TensorBoardHook.for_run(trainer, tmp_path, options=False)
+    hook.register(trainer)
+    seen = {"inside": 0, "steps": 0, "shares": []}
+
+    def count(trainer, batch):
+        td = batch.transitions
+        assert td.batch_size[1] == len(td["agent"][0]) and td["next", "done"][-1].any()
+        assert not td["next", "done"][:-1].any()  # a batch ends where episodes end
+        seen["inside"] += int((td["option"] >= 0).sum())
+        seen["steps"] += td["option"].numel()
+        if batch.population_episode is not None:
+            seen["shares"].append(seen["inside"] / seen["steps"])
+            seen["inside"] = seen["steps"] = 0
+
+    trainer.register_op("post_episodes", count, name="count")
+    trainer.train()
+    hook.close()
+    events = EventAccumulator(str(tmp_path / "tb" / f"given-options_{cfg.map}_P2_seed0"))
+    events.Reload()
+    logged = [e.value for e in events.Scalars("population/option_step_share")]
+    assert len(logged) == 3 and np.allclose(logged, seen["shares"])
+    assert all(0.0 <= v <= 1.0 for v in logged)
+    assert seen["steps"] == 0 and int(trainer.lengths.sum()) > 0

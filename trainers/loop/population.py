@@ -1,22 +1,26 @@
 """``PopulationTrainer``: P independent agents, one Pinball environment each, E episodes each.
 
-The loop reads top to bottom (``train``): step the active environments, let the agent learn
-and act, and when episodes end record them, restart or retire those agents, run the hooks and
-write checkpoints. Agent ``p`` of a population seeded ``S`` is bit-identical to a single run
+The loop reads top to bottom (``train``): iterate the
+:class:`~skillchain_torch.collectors.HierarchicalCollector`, which steps the active
+environments, lets the agents learn and act, and restarts or retires agents whose episodes
+ended; it hands over a ``TensorDict`` batch ``[T, n]`` at every step in which episodes ended,
+and the trainer records those episodes, checks the learners, runs the hooks and writes
+checkpoints. Agent ``p`` of a population seeded ``S`` is bit-identical to a single run
 seeded ``S + p``: its decisions come from its own counter-based stream, its env from its own
 start stream, and every tensor operation is row-independent (no reduction across agents).
 
 Why not ``torchrl.trainers.Trainer``: it assumes one loss module optimised by a torch optimizer
-over a fixed parameter set, fed by a collector yielding fixed-size batches. Here updates are
-closed-form TD steps applied on every environment step, agents finish their episodes at
-different times (the batch shrinks), and in later issues skill chaining spawns options, so an
-agent's parameter set grows during training. The class keeps TorchRL's conventions instead:
-hooks registered by stage and name (``register_op``), stateful components registered with
-``register_module`` and saved with the trainer, a TorchRL logger
+over a fixed parameter set, fed by a collector yielding fixed-size batches to learn from. Here
+updates are closed-form TD steps applied on every environment step, inside the collector's
+step, agents finish their episodes at different times (the batch shrinks), and skill chaining
+spawns options, so an agent's parameter set grows during training. The class keeps TorchRL's
+conventions instead: hooks registered by stage and name (``register_op``), stateful
+components registered with ``register_module`` and saved with the trainer, a TorchRL logger
 (:class:`~.logging.TensorBoardHook`), and ``state_dict``/``load_state_dict`` for checkpoints.
 
 Hook stages: ``"pre_train"`` ``op(trainer)``; ``"post_episodes"`` ``op(trainer, batch)`` after a
-step in which episodes ended (an :class:`EpisodeBatch`); ``"post_checkpoint"``
+step in which episodes ended (an :class:`EpisodeBatch`, with the collector's batch as
+``transitions``); ``"post_checkpoint"``
 ``op(trainer, path)``; ``"post_train"`` ``op(trainer)`` once every agent has finished.
 
 Checkpoints: whenever the slowest agent completes a multiple of ``checkpoint_every`` episodes
@@ -43,7 +47,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tensordict import TensorDict
 
+from skillchain_torch.collectors import HierarchicalCollector
 from skillchain_torch.envs.external import make_env, read_specs
 from skillchain_torch.envs.pinball import PinballEnv
 from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
@@ -74,6 +80,9 @@ class EpisodeBatch:
     lengths: list[int]
     terminated: list[bool]
     population_episode: int | None
+    #: the collector's batch that ended with these episodes (``[T, n]``, the steps since the
+    #: previous batch: every active agent's transitions), for hooks that read transitions
+    transitions: TensorDict | None = None
 
 
 def with_env_sizes(config: TrainConfig, sizes=None) -> TrainConfig:
@@ -172,7 +181,14 @@ class PopulationTrainer:
             agent = make_agent(config, device=self.device, native=native)
         else:
             check_agent(agent, config)
-        self.agent = agent
+        # Skill chaining's top level may anneal its exploration (neural heads need it); agents
+        # step once per population step while active, so the schedule reads global_step.
+        self._epsilon = (None if config.epsilon_init is None else LinearEpsilon(
+            config.epsilon_init, config.epsilon, config.annealing_steps))  # fmt: skip
+        # The loop: the collector steps the envs and the agents, and hands over a batch at
+        # every step in which episodes ended (records, hooks and checkpoints go between).
+        self.collector = HierarchicalCollector(self.stepper, agent, episodes=config.episodes,
+                                               epsilon=self._epsilon, state=False)
         bank = getattr(self.agent, "bank", None)
         if bank is not None and bank.map is None and not bank.legacy:
             bank.map = config.env_name  # saved with the options (another env refuses them)
@@ -180,25 +196,44 @@ class PopulationTrainer:
         P, E = config.runs, config.episodes
         self.returns = np.full((P, E), np.nan)
         self.lengths = np.zeros((P, E), dtype=np.int64)
-        self.episodes_done = np.zeros(P, dtype=np.int64)
-        self.global_step = 0  # loop iterations (every active agent steps once per iteration)
-        self.agent_steps = 0  # environment steps summed over agents
         self.elapsed = 0.0  # wall seconds spent in train(), over resumes
-        self.started = False
         self._finalized = False
         self._clock = time.perf_counter()
         self._training = False
         self._next_checkpoint = config.checkpoint_every or None
-        self._ret = torch.zeros(P, dtype=torch.float64, device=self.device)
-        self._start = torch.zeros(P, dtype=torch.int64, device=self.device)
         self._ops: dict[str, list[tuple[str, object]]] = {stage: [] for stage in STAGES}
         self._modules: dict[str, object] = {}
         self._pending_modules: dict[str, dict] = {}  # loaded before their module registered
-        # Skill chaining's top level may anneal its exploration (neural heads need it); agents
-        # step once per loop iteration while active, so the schedule reads global_step.
-        self._epsilon = (None if config.epsilon_init is None else LinearEpsilon(
-            config.epsilon_init, config.epsilon, config.annealing_steps))  # fmt: skip
         self._anneal()
+
+    @property
+    def agent(self):
+        """The agents the collector drives (assigning one replaces them there too)."""
+        return self.collector.agent
+
+    @agent.setter
+    def agent(self, agent) -> None:
+        self.collector.agent = agent
+
+    # The loop's progress lives in the collector (declared once); the trainer reads it.
+    @property
+    def global_step(self) -> int:
+        """Population steps so far (every active agent steps once per population step)."""
+        return self.collector.global_step
+
+    @property
+    def agent_steps(self) -> int:
+        """Environment steps summed over agents (the collector's frames)."""
+        return self.collector.frames
+
+    @property
+    def episodes_done(self) -> np.ndarray:
+        """Episodes each agent has completed ``[P]`` (a view of the collector's count)."""
+        return self.collector.episodes_done.numpy()
+
+    @property
+    def started(self) -> bool:
+        return self.collector.started
 
     def _anneal(self) -> None:
         """The top level's epsilon at ``global_step`` (where the config anneals it)."""
@@ -235,7 +270,7 @@ class PopulationTrainer:
 
     @property
     def finished(self) -> bool:
-        return self.started and self.num_active == 0
+        return self.collector.finished
 
     def train(self, max_agent_steps: int | None = None) -> PopulationTrainer:
         """Run until every agent has finished its episodes (or ``agent_steps`` reaches
@@ -250,10 +285,12 @@ class PopulationTrainer:
         try:
             try:
                 if not self.started:
-                    self.agent.begin(self.stepper.start())
-                    self.started = True
+                    self.collector.start()
                 self._call("pre_train")
-                self._loop(max_agent_steps)
+                self.collector.max_frames = max_agent_steps
+                for batch in self.collector:  # a batch ends where episodes end, or at the limit
+                    if bool(batch["next", "done"][-1].any()):
+                        self._episode_ends(batch)
             finally:
                 self._tick()
                 self._training = False
@@ -270,55 +307,29 @@ class PopulationTrainer:
         self.elapsed += now - self._clock
         self._clock = now
 
-    def _loop(self, max_agent_steps: int | None) -> None:
-        stepper, agent = self.stepper, self.agent
-        action = agent.actions
-        n = self.num_active
-        limit = float("inf") if max_agent_steps is None else max_agent_steps
-        ret = self._ret
-        while n > 0 and self.agent_steps < limit:
-            obs, reward, ends = stepper.step(action)
-            ret += reward
-            self.global_step += 1
-            self.agent_steps += n
-            if self._epsilon is not None:
-                agent.epsilon = self._epsilon(self.global_step)
-            if ends is None:
-                action = agent.observe(obs, reward)
-                continue
-            self._episode_ends(obs, reward, *ends)
-            action, ret, n = agent.actions, self._ret, self.num_active
-
-    def _episode_ends(self, obs, reward, terminated, truncated) -> None:
-        ended = terminated | truncated
-        rows = ended.nonzero().flatten()
-        agents = self.agent.index[rows].tolist()
-        returns = self._ret[rows].tolist()
-        lengths = (self.global_step - self._start[rows]).tolist()
-        term = terminated[rows].tolist()
-        before = int(self.episodes_done.min())
-        episodes = self.episodes_done[agents].tolist()
+    def _episode_ends(self, batch) -> None:
+        """Record the episodes that ended at the batch's last step, check those agents'
+        learners, run the ``post_episodes`` hooks and write a checkpoint when one is due (the
+        collector has restarted or retired the agents already)."""
+        last = batch[-1]
+        done = last["next", "done"][:, 0]
+        ids = last["agent"][done]
+        agents = ids.tolist()
+        returns = last["next", "episode_reward"][done, 0].tolist()
+        lengths = last["next", "step_count"][done, 0].tolist()
+        term = last["next", "terminated"][done, 0].tolist()
+        episodes_done = self.episodes_done
+        episodes = (episodes_done[agents] - 1).tolist()  # (the collector counted them)
+        before_done = episodes_done.copy()
+        before_done[agents] -= 1
+        before = int(before_done.min())
         self.returns[agents, episodes] = returns
         self.lengths[agents, episodes] = lengths
-        self.episodes_done[agents] += 1
-        finishing = torch.as_tensor(self.episodes_done[agents] >= self.config.episodes,
-                                    device=self.device)
-        restart = rows[~finishing]
-        start_obs = self.stepper.reset(restart) if restart.numel() else None
-        self.agent.observe_ends(obs, reward, terminated, truncated, restart, start_obs)
-        self.check_learners(rows)
-        self._ret[rows] = 0.0
-        self._start[rows] = self.global_step
-        if bool(finishing.any()):
-            keep = torch.ones(ended.shape[0], dtype=torch.bool, device=self.device)
-            keep[rows[finishing]] = False
-            self.stepper.compact(keep)
-            self.agent.compact(keep)
-            self._ret, self._start = self._ret[keep], self._start[keep]
-        after = int(self.episodes_done.min())
-        batch = EpisodeBatch(agents, episodes, returns, lengths, term,
-                             after if after > before else None)
-        self._call("post_episodes", batch)
+        self.check_learners(ids)
+        after = int(episodes_done.min())
+        episode_batch = EpisodeBatch(agents, episodes, returns, lengths, term,
+                                     after if after > before else None, batch)
+        self._call("post_episodes", episode_batch)
         if self._next_checkpoint is not None and after >= self._next_checkpoint:
             self._next_checkpoint = after + self.config.checkpoint_every
             if self.num_active > 0 and self.out_dir is not None:
@@ -376,12 +387,7 @@ class PopulationTrainer:
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:
-        P = self.config.runs
-        index = self.agent.index
-        partial_return = torch.zeros(P, dtype=torch.float64, device=self.device)
-        partial_length = torch.zeros(P, dtype=torch.int64, device=self.device)
-        partial_return[index] = self._ret
-        partial_length[index] = self.global_step - self._start
+        loop = self.collector.state_dict()
         return {
             "config": self.config.to_dict(),
             "agent": self.agent.state_dict(),
@@ -389,13 +395,13 @@ class PopulationTrainer:
             "trainer": {
                 "returns": torch.from_numpy(self.returns.copy()),
                 "lengths": torch.from_numpy(self.lengths.copy()),
-                "episodes_done": torch.from_numpy(self.episodes_done.copy()),
-                "partial_return": partial_return.cpu(),
-                "partial_length": partial_length.cpu(),
-                "global_step": self.global_step,
-                "agent_steps": self.agent_steps,
+                "episodes_done": loop["episodes_done"],
+                "partial_return": loop["partial_return"],
+                "partial_length": loop["partial_length"],
+                "global_step": loop["global_step"],
+                "agent_steps": loop["agent_steps"],
                 "elapsed": self.elapsed,
-                "started": self.started,
+                "started": loop["started"],
                 "next_checkpoint": self._next_checkpoint,
                 "user_agent": self.user_agent,  # its agent section is what the agent declares
             },
@@ -408,17 +414,11 @@ class PopulationTrainer:
         self.stepper.load_state_dict(state["env"])
         self.returns = t["returns"].numpy().copy()
         self.lengths = t["lengths"].numpy().copy()
-        self.episodes_done = t["episodes_done"].numpy().copy()
-        self.global_step = int(t["global_step"])
+        self.collector.load_state_dict(t)
         self._anneal()
-        self.agent_steps = int(t["agent_steps"])
         self.elapsed = float(t["elapsed"])
-        self.started = bool(t["started"])
         self._finalized = False
         self._next_checkpoint = t["next_checkpoint"]
-        index = self.agent.index
-        self._ret = t["partial_return"].to(self.device)[index].clone()
-        self._start = self.global_step - t["partial_length"].to(self.device)[index]
         self._pending_modules = {}
         for name, saved in state["modules"].items():
             if name in self._modules:
@@ -432,17 +432,21 @@ class PopulationTrainer:
                 f"runs={c.runs}, episodes={c.episodes}, seed={c.seed}, active={self.num_active})")
 
     # ------------------------------------------------------------------ divergence
-    def _learners(self, rows: torch.Tensor | None) -> list[tuple[str, str, list[torch.Tensor]]]:
-        """``(learner, advice, tensors)`` with agents on dim 0: the learners of the agents at
-        active rows ``rows`` (``None``: all P agents, after a flush)."""
+    def _learners(self, agents: torch.Tensor | None) -> list[tuple[str, str, list[torch.Tensor]]]:
+        """``(learner, advice, tensors)`` with agents on dim 0: the learners of the agents
+        ``agents`` (ids, ascending; ``None``: all P agents, after a flush)."""
         agent, cfg = self.agent, self.config
-        if rows is None:
+        rows = None
+        if agents is None:
             agent.flush()
             ids = None
-        elif rows.numel() == 1:  # the usual case: views, no copies
-            ids = int(agent.index[rows])
         else:
-            ids = agent.index[rows]
+            index = agent.index
+            found = torch.searchsorted(index, agents.to(index.device)).clamp(
+                max=max(index.numel() - 1, 0))  # fmt: skip
+            if index.numel() and bool((index[found] == agents.to(index.device)).all()):
+                rows = found  # all still active: the compact rows of their ids
+            ids = int(agents[0]) if agents.numel() == 1 else agents  # (one: views, no copies)
 
         def pick(t: torch.Tensor) -> torch.Tensor:
             if ids is None:
@@ -454,6 +458,9 @@ class PopulationTrainer:
         working = getattr(agent, "working_weights", None)  # the flat agent's, without a flush
         if rows is not None and working is not None:
             top = working(rows)
+        elif agents is not None and working is not None:  # some just retired (and flushed)
+            agent.flush()
+            top = [pick(t) for t in _per_agent(agent.q_head, agent.population)]
         elif getattr(agent, "q_head", None) is None:  # an agent of the protocol alone
             top = []  # (EpisodeAgent declares no head; nothing the trainer can check)
         else:
@@ -489,17 +496,17 @@ class PopulationTrainer:
         return [(name, "lower its step size where you built the agent", tensors)
                 for name, _, tensors in learners]  # fmt: skip
 
-    def check_learners(self, rows: torch.Tensor | None = None) -> None:
-        """Raise :class:`Diverged` if a learner of the agents at active rows ``rows`` (default:
-        every agent) holds a NaN or infinite weight. One reduction per tensor and one sync
-        when all is well."""
-        learners = self._learners(rows)
+    def check_learners(self, agents: torch.Tensor | None = None) -> None:
+        """Raise :class:`Diverged` if a learner of the agents ``agents`` (ids; default: every
+        agent) holds a NaN or infinite weight. One reduction per tensor and one sync when all
+        is well."""
+        learners = self._learners(agents)
         # A sum is non-finite if any term is (an overflowing sum of finite weights is looked
         # at below and passes).
         sums = [t.sum() for _, _, tensors in learners for t in tensors]
         if not sums or math.isfinite(torch.stack(sums).sum()):
             return
-        ids = (torch.arange(self.config.runs) if rows is None else self.agent.index[rows]).tolist()
+        ids = (torch.arange(self.config.runs) if agents is None else agents).tolist()
         found: dict[str, list[int]] = {}
         parts = []
         for learner, advice, tensors in learners:

@@ -128,6 +128,12 @@ def read_checkpoint(path: str | Path) -> dict:
     for field in ("config", *_SECTIONS, "modules"):
         if not isinstance(state.get(field), dict):
             raise DamagedCheckpoint(f"{path}: field {field!r} is missing or not a dict")
+    # A damaged key (a flipped bit in "sha256" itself) would otherwise read as a file saved
+    # before checkpoints had a digest, and skip the check: nothing else is ever saved here.
+    unknown = sorted(set(state) - {"format_version", "config", *_SECTIONS, "modules", CHECKSUM})
+    if unknown:
+        raise DamagedCheckpoint(f"{path}: unknown field {str(unknown[0])[:40]!r}: the file was "
+                                "altered or damaged after it was written")
     for section, keys in _SECTIONS.items():
         if section == "env" and state["env"].get("kind") == "torchrl-envs":
             keys = ("index", "step_count")  # (EnvStepper: a Gymnasium/TorchRL env's counters)

@@ -124,6 +124,9 @@ class TensorBoardHook(TimedHook):
         self.option_monitor = None
         self._last = None  # (elapsed, agent_steps) at the previous population point
         self.seconds = 0.0  # wall time writing the scalars (recorded in run_info.json)
+        # Read from the collector's batches: agent steps taken inside an option, and all
+        # agent steps, since the previous population point.
+        self._option_steps, self._steps = 0, 0
 
     @classmethod
     def for_run(cls, trainer, out_dir: str | Path, **kwargs) -> TensorBoardHook:
@@ -151,6 +154,10 @@ class TensorBoardHook(TimedHook):
 
     def _post_episodes(self, trainer, batch) -> None:
         log = self.logger.log_scalar
+        transitions = batch.transitions
+        if transitions is not None and "option" in transitions.keys():
+            self._option_steps += int((transitions["option"] >= 0).sum())
+            self._steps += transitions["option"].numel()
         if self.per_agent:
             for p, e, r, n in zip(batch.agents, batch.episodes, batch.returns, batch.lengths):
                 log(f"agent_{p}/return", r, step=e + 1)
@@ -170,6 +177,9 @@ class TensorBoardHook(TimedHook):
             log("perf/agent_steps_per_second", rate, step=episode)
         log("perf/active_agents", trainer.num_active, step=episode)
         self._last = (elapsed, trainer.agent_steps)
+        if self._steps:  # the share of agent steps an option took, since the last point
+            log("population/option_step_share", self._option_steps / self._steps, step=episode)
+            self._option_steps, self._steps = 0, 0
 
     def post_train(self, trainer) -> None:
         self.logger.experiment.flush()
