@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 ROLES = [  # (path prefix, role in DESIGN.md's reader's path)
-    ("trainers/", "1 trainer"), ("envs/", "6 env"),
+    ("trainers/", "1 trainer"), ("skillchain_torch/collectors/", "1 collector"), ("envs/", "6 env"),
     ("skillchain_torch/agents/", "2 agent"), ("skillchain_torch/objectives/", "3 losses"),
     ("skillchain_torch/policies/", "2 agent (choice)"), ("skillchain_torch/modules/", "4 heads"),
     ("skillchain_torch/options/", "4 option set"), ("skillchain_torch/features/", "4 features"),

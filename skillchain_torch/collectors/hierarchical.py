@@ -67,6 +67,7 @@ Example:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 
 import torch
@@ -161,55 +162,59 @@ class HierarchicalCollector:
         return next(iter(self))
 
     def _steps(self, index: Tensor) -> TensorDict:
-        """Step the active agents ``index`` until the batch ends; the batch ``[T, n]``."""
-        stepper, agent = self.stepper, self.agent
+        """Step the active agents ``index`` until the batch ends; the batch ``[T, n]``.
+
+        This loop runs every population step of a run, so its lists are locals. The agent's
+        ``actions`` are kept without a copy: an agent replaces them, it does not write them in
+        place (the built-in agents replace every state tensor)."""
+        stepper, agent, schedule = self.stepper, self.agent, self.epsilon
         n = int(index.numel())
-        limit = self.max_frames if self.max_frames is not None else float("inf")
+        cap = math.inf if self.frames_per_batch is None else max(1, self.frames_per_batch // n)
+        limit = math.inf if self.max_frames is None else self.max_frames
         if self.total_frames >= 0:
             limit = min(limit, self.total_frames)
-        steps = None if self.frames_per_batch is None else max(1, self.frames_per_batch // n)
         decisions = hasattr(type(agent), "decisions")  # (on the class: no property call)
-        rows: dict[str, list] = {"observation": [], "action": [], "next_observation": [],
-                                 "reward": [], "episode_reward": [], "global_step": [],
-                                 "start": [], "ends": []}
-        if decisions:
-            rows["decision"], rows["option"] = [], []
-        if self.state:
-            rows["state"], rows["next_state"] = [], []
+        record_state = self.state
+        first_step = self.global_step + 1
+        observations, actions, next_observations, rewards, returns, starts, ends_at = \
+            [], [], [], [], [], [], []  # fmt: skip
+        decision, option, state, next_state = [], [], [], []
         action = agent.actions
         while True:
-            rows["observation"].append(self._obs)
-            rows["action"].append(action.clone())
+            observations.append(self._obs)
+            actions.append(action)
             if decisions:
-                rows["decision"].append(agent.decisions)
-                rows["option"].append(agent.options)
-            if self.state:
-                rows["state"].append(stepper.raw_state())
+                decision.append(agent.decisions)
+                option.append(agent.options)
+            if record_state:
+                state.append(stepper.raw_state())
             obs, reward, ends = stepper.step(action)
-            self._ret = self._ret + reward  # the episode's return so far (a new tensor a step)
+            self._ret = ret = self._ret + reward  # the episode's return so far (a new tensor)
             self.global_step += 1
             self.frames += n
-            if self.epsilon is not None:
-                agent.epsilon = self.epsilon(self.global_step)
-            rows["next_observation"].append(obs)
-            rows["reward"].append(reward)
-            rows["episode_reward"].append(self._ret)
-            rows["global_step"].append(self.global_step)  # (the episode's steps: at the end)
-            rows["start"].append(self._start)
-            rows["ends"].append(ends)
-            if self.state:
-                rows["next_state"].append(stepper.raw_state())
+            if schedule is not None:
+                agent.epsilon = schedule(self.global_step)
+            next_observations.append(obs)
+            rewards.append(reward)
+            returns.append(ret)
+            starts.append(self._start)
+            if record_state:
+                next_state.append(stepper.raw_state())
             if ends is None:
                 action = agent.observe(obs, reward)
                 self._obs = obs
-                if len(rows["reward"]) == steps or self.frames >= limit:
-                    return self._batch(rows, index)
-                continue
+                if len(rewards) < cap and self.frames < limit:
+                    continue
+                break
+            ends_at.append((len(rewards) - 1, ends))
             self._episode_ends(obs, reward, *ends)
-            if steps is None or len(rows["reward"]) == steps or self._retired \
-                    or self.frames >= limit:  # fmt: skip (rows change: the batch ends here)
-                return self._batch(rows, index)
+            if (self.frames_per_batch is None or self._retired or len(rewards) >= cap
+                    or self.frames >= limit):  # fmt: skip (the rows change: the batch ends)
+                break
             action = agent.actions
+        return self._batch(index, first_step, observations, actions, next_observations,
+                           rewards, returns, starts, ends_at, decision, option, state,
+                           next_state)  # fmt: skip
 
     def _episode_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor,
                       truncated: Tensor) -> None:  # fmt: skip
@@ -238,32 +243,29 @@ class HierarchicalCollector:
             self.agent.compact(keep)
             self._ret, self._start, self._obs = self._ret[keep], self._start[keep], self._obs[keep]
 
-    def _batch(self, rows: dict[str, list], index: Tensor) -> TensorDict:
-        T, n = len(rows["reward"]), int(index.numel())
-        device = rows["reward"][0].device
-        flags = {k: torch.zeros(T, n, 1, dtype=torch.bool, device=device)
-                 for k in ("terminated", "truncated")}  # fmt: skip
-        for t, ends in enumerate(rows["ends"]):
-            if ends is not None:
-                flags["terminated"][t, :, 0], flags["truncated"][t, :, 0] = ends
-        next_obs = torch.stack(rows["next_observation"])
-        if rows["observation"][0] is None:  # resumed without the current observations
-            rows["observation"][0] = torch.full_like(next_obs[0], float("nan"))
-        step = (torch.tensor(rows["global_step"], device=device)[:, None]
-                - torch.stack(rows["start"]))  # fmt: skip
-        nxt = {"observation": next_obs,
-               "reward": torch.stack(rows["reward"])[..., None],
-               "episode_reward": torch.stack(rows["episode_reward"])[..., None],
-               "step_count": step[..., None],
-               "terminated": flags["terminated"], "truncated": flags["truncated"],
-               "done": flags["terminated"] | flags["truncated"]}  # fmt: skip
-        out = {"agent": index.expand(T, n), "observation": torch.stack(rows["observation"]),
-               "action": torch.stack(rows["action"]), "next": nxt}
-        for key in ("decision", "option", "state"):
-            if key in rows:
-                out[key] = torch.stack(rows[key])
-        if self.state:
-            nxt["state"] = torch.stack(rows["next_state"])
+    def _batch(self, index, first_step, observations, actions, next_observations, rewards,
+               returns, starts, ends_at, decision, option, state, next_state) -> TensorDict:
+        """The ``TensorDict [T, n]`` of the steps just taken (lists of ``[n, ...]`` tensors)."""
+        T, n = len(rewards), int(index.numel())
+        device = rewards[0].device
+        next_obs = torch.stack(next_observations)
+        if observations[0] is None:  # resumed without the current observations
+            observations[0] = torch.full_like(next_obs[0], float("nan"))
+        terminated = torch.zeros(T, n, 1, dtype=torch.bool, device=device)
+        truncated = torch.zeros(T, n, 1, dtype=torch.bool, device=device)
+        for t, (term, trunc) in ends_at:
+            terminated[t, :, 0], truncated[t, :, 0] = term, trunc
+        step = torch.arange(first_step, first_step + T, device=device)[:, None]
+        nxt = {"observation": next_obs, "reward": torch.stack(rewards)[..., None],
+               "episode_reward": torch.stack(returns)[..., None],
+               "step_count": (step - torch.stack(starts))[..., None],
+               "terminated": terminated, "truncated": truncated, "done": terminated | truncated}
+        out = {"agent": index.expand(T, n), "observation": torch.stack(observations),
+               "action": torch.stack(actions), "next": nxt}
+        if decision:
+            out["decision"], out["option"] = torch.stack(decision), torch.stack(option)
+        if state:
+            out["state"], nxt["state"] = torch.stack(state), torch.stack(next_state)
         return TensorDict(out, batch_size=[T, n], device=device)
 
     # ------------------------------------------------------------------ state

@@ -289,7 +289,7 @@ class PopulationTrainer:
                 self._call("pre_train")
                 self.collector.max_frames = max_agent_steps
                 for batch in self.collector:  # a batch ends where episodes end, or at the limit
-                    if bool(batch["next", "done"][-1].any()):
+                    if bool(batch.get(("next", "done"))[-1].any()):
                         self._episode_ends(batch)
             finally:
                 self._tick()
@@ -311,13 +311,13 @@ class PopulationTrainer:
         """Record the episodes that ended at the batch's last step, check those agents'
         learners, run the ``post_episodes`` hooks and write a checkpoint when one is due (the
         collector has restarted or retired the agents already)."""
-        last = batch[-1]
-        done = last["next", "done"][:, 0]
-        ids = last["agent"][done]
+        nxt = batch.get("next")
+        done = nxt.get("done")[-1, :, 0]  # (the leaves' last step: no TensorDict indexing)
+        ids = batch.get("agent")[-1][done]
         agents = ids.tolist()
-        returns = last["next", "episode_reward"][done, 0].tolist()
-        lengths = last["next", "step_count"][done, 0].tolist()
-        term = last["next", "terminated"][done, 0].tolist()
+        returns = nxt.get("episode_reward")[-1, done, 0].tolist()
+        lengths = nxt.get("step_count")[-1, done, 0].tolist()
+        term = nxt.get("terminated")[-1, done, 0].tolist()
         episodes_done = self.episodes_done
         episodes = (episodes_done[agents] - 1).tolist()  # (the collector counted them)
         before_done = episodes_done.copy()
