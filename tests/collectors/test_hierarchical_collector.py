@@ -63,3 +63,34 @@ def test_option_annotations_and_restarts():
     assert torch.equal(start[:, 2:], torch.zeros_like(start[:, 2:]))  # restarts at rest
     # an option lasts at most max_option_steps = 10 consecutive steps in one decision
     assert int(agent.duration.max()) <= 10
+
+
+def test_doctests():
+    import doctest
+
+    from skillchain_torch import interfaces
+    from skillchain_torch.collectors import hierarchical
+
+    for module in (hierarchical, interfaces):
+        assert doctest.testmod(module).attempted > 0
+        assert doctest.testmod(module).failed == 0
+
+
+def test_trainer_mode_batches_end_where_episodes_end_and_retire_agents():
+    """``frames_per_batch=None`` and an episode budget (what the trainer runs): every batch
+    ends at a step in which an episode ended, its rows never change inside it, its returns and
+    step counts add up, and the collector stops once every agent has run its episodes."""
+    env, agent = make(population=2, max_episode_steps=30)
+    collector = HierarchicalCollector(env, agent, episodes=2, state=False)
+    batches = list(collector)
+    assert collector.finished and collector.episodes_done.tolist() == [2, 2]
+    ends = 0
+    for td in batches:
+        done = td["next", "done"][..., 0]
+        assert bool(done[-1].any()) and not bool(done[:-1].any())
+        assert torch.equal(td["agent"], td["agent"][:1].expand_as(td["agent"]))
+        ended = done[-1]
+        ends += int(ended.sum())
+        steps = td["next", "step_count"][-1, ended, 0]
+        assert bool((steps == 30).all())  # truncated at 30 steps, counted from its start
+    assert ends == 4 and "state" not in td.keys()
