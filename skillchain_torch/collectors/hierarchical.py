@@ -74,6 +74,8 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
+from skillchain_torch.interfaces import EnvStepper
+
 __all__ = ["HierarchicalCollector"]
 
 
@@ -101,8 +103,8 @@ class HierarchicalCollector:
                  total_frames: int = -1, *, episodes: int | None = None,
                  epsilon: Callable[[int], float] | None = None,
                  state: bool | None = None):  # fmt: skip
-        if hasattr(env, "step") and hasattr(env, "reset") and hasattr(env, "num_active"):
-            self.stepper = env  # an env stepper already
+        if isinstance(env, EnvStepper):  # the declared seam (interfaces), not a guess
+            self.stepper = env
         else:
             from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
 

@@ -266,7 +266,7 @@ class PopulationTrainer:
     # ------------------------------------------------------------------ loop
     @property
     def num_active(self) -> int:
-        return int(self.agent.index.numel())
+        return self.collector.num_active
 
     @property
     def finished(self) -> bool:
