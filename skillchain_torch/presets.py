@@ -174,6 +174,7 @@ class Preset:
     convergence_threshold: float
     convergence_episodes: int
     overlap: bool
+    subgoals: str
     # initiation sets: logistic regression, and the reading of section 5.1's open points
     degree: int
     lr: float
@@ -232,6 +233,7 @@ PAPER = Preset(
     convergence_threshold=0.15,  # 5.1: weights changed on average less than 0.15 ...
     convergence_episodes=2,  # 5.1: ... for two consecutive episodes
     overlap=True,  # 4.3: no overlap with siblings or parents
+    subgoals="chained",  # 4.3: new options aim at the sets of the options already there
     degree=2,  # 5.1: 2nd order polynomial features
     lr=0.1,  # 5.1: learning rate eta = 0.1
     sweeps=100,  # 5.1: 100 sweeps per new data point

@@ -6,15 +6,7 @@ cd "$(dirname "$0")/../.."
 OUT=${1:-runs/faithful-screen100}
 mkdir -p "$OUT"
 SC=".venv/bin/skillchain train --map pinball_simple_single --runs 100 --episodes 250 --seed 0 --quiet"
-run() {
-  name=$1; shift
-  [ -f "$OUT/$name/run_info.json" ] && return
-  if [ -d "$OUT/$name/checkpoints" ]; then
-    nice -n 10 .venv/bin/skillchain train --resume "$OUT/$name" --quiet >> "$OUT/$name.log" 2>&1
-  else
-    nice -n 10 $SC "$@" --out "$OUT/$name" > "$OUT/$name.log" 2>&1
-  fi
-}
+source results/run_arm.sh
 run flat --agent flat
 run paper-b2 --agent skill-chaining --preset paper --initiation-start biased --initiation-bias 2 --initiation-centered
 run paper-b4 --agent skill-chaining --preset paper --initiation-start biased --initiation-bias 4 --initiation-centered

@@ -92,6 +92,7 @@ from skillchain_torch.discovery.skill_chaining import (
     overlap_exclusion,
     target_indicator,
 )
+from skillchain_torch.discovery.subgoals import SUBGOALS, random_subgoals
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.objectives import (
@@ -905,7 +906,7 @@ class SkillChainingAgent(HierarchicalAgent):
                  wait_for_both_classes: bool = False,
                  reading: InitiationReading = FIRST_READING, policy_start: str = "zero",
                  value_start: str = "max-sample", value_bonus: float = 0.0,
-                 **kwargs):  # fmt: skip
+                 chaining: bool = True, **kwargs):  # fmt: skip
         super().__init__(bank, events=events, **kwargs)
         # Two starts read the linear head's weights and the Fourier basis directly.
         uses = [f"value_start={value_start!r}"] * (value_start == "agent") + \
@@ -923,6 +924,7 @@ class SkillChainingAgent(HierarchicalAgent):
             wait_for_both_classes=wait_for_both_classes, reading=reading,
             policy_start=policy_start, value_start=value_start, value_bonus=value_bonus,
             top_basis=self.features, completion_reward=self.option_update.completion_reward,
+            chaining=chaining,
         )  # fmt: skip
         # Q(s, d) of the decision d in force at the current state s, valued when s was reached
         # (before that step's update): the samples of gestation.
@@ -1001,6 +1003,14 @@ class SkillChainingAgent(HierarchicalAgent):
                                   learner)  # fmt: skip
         reading = InitiationReading(p.gestation_positives, p.initiation_start,
                                     p.initiation_constrain, p.one_class_fits)  # fmt: skip
+        if p.subgoals not in SUBGOALS:
+            raise ValueError(f"subgoals must be one of {', '.join(SUBGOALS)}, got {p.subgoals!r}")
+        if p.subgoals == "random":  # the control: the goal, and random discs for the rest
+            if "events" in kwargs:
+                raise ValueError("subgoals 'random' draws its own events; leave events out")
+            kwargs["events"] = (GoalEvent(), *random_subgoals(population, p.slots - 1, seed,
+                                                              map, device=device))
+            kwargs["chaining"] = False
         arguments = dict(
             order=order if p.order is None else p.order,
             alpha=alpha if p.alpha is None else p.alpha, gamma=p.gamma, epsilon=p.epsilon,

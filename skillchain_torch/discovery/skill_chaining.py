@@ -148,6 +148,10 @@ class SkillChaining:
             own ``max_a Q(s, a)`` fitted in its basis, plus ``value_bonus``). Needs ``top_basis``.
         value_bonus: added to ``Q(s, o)`` everywhere under ``value_start="agent"``.
         top_basis: the agent's top-level :class:`~skillchain_torch.features.FourierBasis`.
+        chaining: a learned initiation set becomes a target event (section 4.3: the chain
+            grows backwards from the goal). ``False``: the controls of :mod:`.subgoals`; only
+            base events are targets, and base event n >= 1 is listed once the agent has n
+            learned sets (where chaining would have added its n-th target).
     """
 
     def __init__(
@@ -167,6 +171,7 @@ class SkillChaining:
         value_bonus: float = 0.0,
         top_basis=None,
         completion_reward: float = 10_000.0,
+        chaining: bool = True,
     ):
         if value_start not in VALUE_STARTS:
             raise ValueError(f"value_start must be one of {', '.join(VALUE_STARTS)}, "
@@ -187,7 +192,7 @@ class SkillChaining:
         self._projection: Tensor | None = None
         if gestation < 0 or max_branching < 0 or max_option_steps < 1:
             raise ValueError("need gestation >= 0, max_branching >= 0, max_option_steps >= 1")
-        self.bank = bank
+        self.bank, self.chaining = bank, bool(chaining)
         if isinstance(bank.classifier, InitiationClassifier):  # discovery fits every set it
             check_fittable(bank.classifier)  # learns: refuse one that cannot, before the run
         self.events = tuple(events)
@@ -396,7 +401,8 @@ class SkillChaining:
                 f"gestation={self.gestation}, max_branching={self.max_branching}, "
                 f"convergence={self.convergence.threshold}x{self.convergence.episodes}, "
                 f"max_option_steps={self.max_option_steps}, overlap={self.overlap}, "
-                f"reading={self.reading.name}, policy_start={self.policy_start!r})")
+                f"reading={self.reading.name}, policy_start={self.policy_start!r}"
+                + ("" if self.chaining else ", chaining=False") + ")")
 
     # ------------------------------------------------------------------ per-step rules
     def _gestation_hits(self, raw_now: Tensor, reached: Tensor, stepped: Tensor) -> Tensor:
@@ -466,6 +472,13 @@ class SkillChaining:
         full = bank.full()
         open_ = (~(full & self.slots_full_logged))[:, None]
         base_trig, slot_trig = base_trig & base_on & open_, slot_trig & slot_on & open_
+        if not self.chaining:  # the controls of .subgoals: base events in place of the chain
+            # Where chaining would add a learned set as a target, base event n (n >= 1) is
+            # listed once the agent has n learned sets: the same moments, another target.
+            learned = (bank.status == OptionStatus.LEARNED).sum(1, keepdim=True)
+            base_trig = base_trig & (torch.arange(base_trig.shape[1],
+                                                  device=learned.device) <= learned)
+            slot_trig = torch.zeros_like(slot_trig)
         if not (bool(base_trig.any()) or bool(slot_trig.any())):  # nothing can be created
             return torch.zeros(bank.population, dtype=torch.bool, device=base_trig.device)
         base_cov, slot_cov = covered_start(bank, len(self.events), contains, option)

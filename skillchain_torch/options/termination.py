@@ -102,6 +102,14 @@ class RegionEvent:
             squared = squared + diff[:, j] * diff[:, j]
         return torch.sqrt(squared) <= self.radius
 
+    def select_agents(self, rows: Sequence[int] | Tensor) -> RegionEvent:
+        """The event of agents ``rows`` (repeats allowed), as ``OptionBank.select_agents``:
+        a centre per agent keeps those rows' centres; one shared centre stays shared."""
+        center = self.center
+        if center.ndim == 2:
+            center = center[torch.as_tensor(rows, dtype=torch.int64, device=center.device)]
+        return RegionEvent(center, self.radius, self.dims, self.name)
+
     def __repr__(self) -> str:
         return f"RegionEvent(name={self.name!r}, dims={self.dims}, radius={self.radius})"
 

@@ -35,6 +35,7 @@ def built_values(agent: SkillChainingAgent) -> dict:
         gestation=d.gestation, max_branching=d.max_branching,
         convergence_threshold=d.convergence.threshold,
         convergence_episodes=d.convergence.episodes, overlap=d.overlap,
+        subgoals="chained" if d.chaining else "random",
         degree=clf["degree"], lr=clf["lr"], sweeps=clf["sweeps"], distance=clf["distance"],
         capacity=clf["capacity"], balanced=clf["balanced"],
         keep_negatives=clf["keep_negatives"], store_failures=agent.bank.classifier.store_failures,

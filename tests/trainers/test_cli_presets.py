@@ -124,10 +124,11 @@ def test_build_default_and_the_cli_default_agent_give_the_same_returns(tmp_path)
 
 
 def test_committed_configs_without_a_preset_load_as_the_default():
-    """Every published run predates presets; they ran the default preset's values, but for
-    fields added after them, which load with the value every run before them had
-    (``LEGACY_FIELDS``: ``end_outside_set`` "off", the default now "learned")."""
-    paths = sorted((ROOT / "results" / "paper-v3").glob("*/*/config.json"))
+    """Every run published before presets ran the default preset's values, but for fields
+    added after them, which load with the value every run before them had (``LEGACY_FIELDS``:
+    ``end_outside_set`` "off", the default now "learned"). The configs are those of the study
+    ``results/paper-v3`` (in git at 6835785), kept in ``tests/data/legacy_configs``."""
+    paths = sorted((ROOT / "tests" / "data" / "legacy_configs").glob("*.json"))
     assert len(paths) == 6
     for path in paths:
         raw = json.loads(path.read_text())
@@ -196,3 +197,20 @@ def test_the_study_takes_a_preset():
     default = {e.name: e.config for e in paper_experiments()}
     assert default["simple/skill-chaining"].mismatches(sc)  # the two studies differ
     assert not default["simple/flat"].mismatches(exps["simple/flat"].config)  # but not flat
+
+
+def test_subgoals_random_reaches_the_agent_and_a_bad_value_is_one_line(capsys):
+    """Issue 52's control (b) from the command line: ``--subgoals random`` builds the goal and
+    one random disc per other slot, with chaining off; an unknown value is refused."""
+    from skillchain_torch.agents.skill_chaining_run import SkillChainingRunAgent
+
+    config = config_of("--agent", "skill-chaining", "--subgoals", "random", "--slots", "3",
+                       "--runs", "2")  # fmt: skip
+    assert config.subgoals == "random"
+    agent = SkillChainingRunAgent(config)
+    assert [e.name for e in agent.events] == ["goal", "subgoal 1", "subgoal 2"]
+    assert not agent.discovery.chaining
+    assert config_of("--agent", "skill-chaining").resolved().subgoals == "chained"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["train", "--subgoals", "nearby"])
+    assert "invalid choice: 'nearby'" in capsys.readouterr().err

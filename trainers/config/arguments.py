@@ -31,7 +31,7 @@ CONFIG_OPTIONS = (
     "keep_negatives", "store_failures", "constrain_nearest", "intra_option_primitives",
     "intra_option_target", "option_interruption", "end_outside_set", "policy_start",
     "value_start", "value_bonus", "option_alpha", "completion_reward", "gestation",
-    "convergence_threshold", "max_branching",
+    "convergence_threshold", "max_branching", "subgoals",
     *NEURAL_OPTIONS,
 )  # fmt: skip
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 
+from skillchain_torch.discovery.subgoals import SUBGOALS
 from skillchain_torch.presets import DEFAULT, PAPER
 
 __all__ = ["add_discovery_arguments"]
@@ -153,6 +154,14 @@ def add_discovery_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="an initiation set is learned, and becomes a target event, when its weights moved "
         "less than this per episode twice in a row (default: the paper's 0.15)",
+    )
+    parser.add_argument(
+        "--subgoals",
+        choices=SUBGOALS,
+        default=None,
+        help="where new options aim: the sets of the options already there (chained, the "
+        "paper's), or, as a control, the goal and one random disc per other slot (random: "
+        "no chaining; skillchain_torch.discovery.subgoals) (default chained)",
     )
     parser.add_argument(
         "--completion-reward",

@@ -17,6 +17,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from skillchain_torch.discovery.subgoals import SUBGOALS
 from skillchain_torch.presets import PRESET_FIELDS, preset_named
 from skillchain_torch.resources import device_problem
 from skillchain_torch.resources import format_bytes as _size
@@ -197,7 +198,7 @@ def check_values(config) -> None:
         *((name, repr(getattr(config, name)), getattr(config, name) in known,
            f"one of {', '.join(sorted(known))}") for name, known in (
             ("top_head", TOP_HEADS), ("option_head", OPTION_HEADS),
-            ("initiation", INITIATIONS))),
+            ("initiation", INITIATIONS), ("subgoals", SUBGOALS))),
     ]
     if config.agent == "skill-chaining" and config.top_head != "fourier" and (
             config.policy_start != "zero" or config.value_start == "agent"):  # fmt: skip

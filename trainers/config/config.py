@@ -137,6 +137,9 @@ class TrainConfig:
             twice in a row (paper: 0.15).
         max_branching: (preset) options per target event (paper: 3; 0 creates none: the
             same agent and learners without options, a flat baseline for any head).
+        subgoals: (preset) where new options aim: ``"chained"`` (the paper's: the sets of the
+            options already there) or ``"random"`` (issue 52's control: the goal and
+            ``slots - 1`` random discs, :mod:`skillchain_torch.discovery.subgoals`).
         env: ``None`` for Pinball (``map``), else ``"gymnasium:ID"`` or
             ``"gymnasium:MODULE:ID"``: a Gymnasium env through TorchRL's ``GymEnv`` (see
             :mod:`skillchain_torch.envs.external`).
@@ -198,6 +201,7 @@ class TrainConfig:
     gestation: int | None = None
     convergence_threshold: float | None = None
     max_branching: int | None = None
+    subgoals: str | None = None
 
     env: str | None = None
     obs_bounds: str | None = None

@@ -19,7 +19,8 @@ LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_neg
                  "option_interruption": False, "end_outside_set": "off",
                  "top_head": "fourier", "option_head": "fourier", "initiation": "logistic",
                  "max_branching": 3, "top_lr": 1e-3, "top_target_update": 250,
-                 "top_bootstrap": "sarsa", "epsilon_init": None, "annealing_steps": 0}
+                 "top_bootstrap": "sarsa", "epsilon_init": None, "annealing_steps": 0,
+                 "subgoals": "chained"}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
@@ -35,7 +36,7 @@ _DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestati
                      "keep_negatives", "store_failures", "constrain_nearest", "policy_start",
                      "value_start",
                      "value_bonus", "option_alpha", "gestation", "convergence_threshold",
-                     "max_branching")
+                     "max_branching", "subgoals")
 # The "mlp" top level's learner: a run whose top level is the built-in Fourier head never reads
 # them (so a saved Fourier run stays valid when the paper preset's MLP learner values change).
 MLP_TOP_FIELDS = ("top_lr", "top_target_update", "top_bootstrap")

@@ -63,7 +63,8 @@ def _frozen_agents(agent, rows, epsilon: float, seeds) -> HierarchicalAgent:
     frozen = HierarchicalAgent(agent.bank.select_agents(rows), order=agent.order, alpha=0.0,
                                gamma=agent.gamma, epsilon=epsilon, option_epsilon=epsilon,
                                seed=torch.tensor([int(s) for s in seeds], dtype=torch.int64),
-                               events=agent.events, max_option_steps=agent.max_option_steps,
+                               events=tuple(_event_rows(e, rows) for e in agent.events),
+                               max_option_steps=agent.max_option_steps,
                                overlap=True, **own)  # fmt: skip
     if not own:
         with torch.no_grad():
@@ -72,6 +73,12 @@ def _frozen_agents(agent, rows, epsilon: float, seeds) -> HierarchicalAgent:
         if hasattr(frozen.bank.q_head, name):
             setattr(frozen.bank.q_head, name, 0.0)
     return frozen
+
+
+def _event_rows(event, rows):
+    """A base event for agents ``rows``: its own rows where it holds a value per agent
+    (``select_agents``, as a random subgoal's centre), else the event itself."""
+    return event.select_agents(rows) if hasattr(event, "select_agents") else event
 
 
 @torch.no_grad()
