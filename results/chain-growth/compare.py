@@ -4,9 +4,12 @@ The setting's skill-chaining agents ran as runs of 50 agents (``--seed 1000`` an
 1050``; by the seed contract they are agents 0-99 of one population with seed 1000). They are
 compared, episode window by window, with the first episodes of the paper study's flat and
 gestation-10 skill-chaining runs on the same seeds (``results/paper-v2/simple``): an agent's
-first 50 episodes do not depend on how many episodes it runs in all.
+first 50 episodes do not depend on how many episodes it runs in all. That study was removed from
+the tree: it is ``results/paper-v2`` in git at 6835785, restorable with
+``git archive 6835785 results/paper-v2 | tar -x``.
 
-    python results/chain-growth/compare.py --name g2 runs/confirm/g2-s1000 runs/confirm/g2-s1050
+    python results/chain-growth/compare.py --name g2 --paper results/paper-v2 \
+        runs/confirm/g2-s1000 runs/confirm/g2-s1050
 """
 
 from __future__ import annotations
@@ -21,13 +24,15 @@ import numpy as np
 from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
 
 HERE = Path(__file__).resolve().parent
-PAPER = HERE.parent / "paper-v2" / "simple"
 WINDOWS = ((1, 10), (11, 25), (26, 50))
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--name", required=True, help="the setting, e.g. g2 (--gestation 2)")
+    p.add_argument("--paper", required=True, type=Path, help="the study with the flat and "
+                   "gestation-10 skill-chaining runs (its simple/<agent> folders)")
     p.add_argument("runs", nargs="+", type=Path, help="run directories, in seed order")
     args = p.parse_args()
     out = HERE / args.name
@@ -41,9 +46,9 @@ def main() -> None:
         shutil.copy(d / "run_info.json", out / f"run_info_{i}.json")
     R = arrays["returns"]
     E = R.shape[1]
-    peers = {k: np.load(PAPER / k / "returns.npy")[: len(R), :E]
+    peers = {k: np.load(args.paper / "simple" / k / "returns.npy")[: len(R), :E]
              for k in ("flat", "skill-chaining")}  # fmt: skip
-    rows = ["| episodes | flat | gestation 10 (results/paper-v2) | " + args.name
+    rows = [f"| episodes | flat | gestation 10 ({args.paper}) | " + args.name
             + " | " + args.name + " - flat | " + args.name + " - gestation 10 |",
             "|---|---|---|---|---|---|"]  # fmt: skip
     result = {}

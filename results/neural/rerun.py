@@ -14,11 +14,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root
-
-from skillchain_torch.trainers.config.config import TrainConfig  # noqa: E402
-from skillchain_torch.trainers.loop.population import PopulationTrainer  # noqa: E402
-from skillchain_torch.trainers.outputs.run_outputs import train_and_write  # noqa: E402
+from skillchain_torch.trainers.config.config import TrainConfig
+from skillchain_torch.trainers.loop.population import PopulationTrainer
+from skillchain_torch.trainers.outputs.run_outputs import train_and_write
 
 
 def main(argv: list[str]) -> int:

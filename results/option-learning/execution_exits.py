@@ -21,11 +21,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from timeout_starts import on_execution_end  # this folder's script: the same hook, one place
 
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from timeout_starts import on_execution_end  # noqa: E402  (the same hook, one place)
 
 HERE = Path(__file__).resolve().parent
 STAYS = (3, 5, 10, 20)

@@ -12,9 +12,9 @@ block=$1 name=$2; shift 2
 map=pinball_simple_single episodes=250 every=25
 case $block in
   screen) runs=20 seed=0 ;;  # screening only, never the reported evidence
-  confirm) runs=100 seed=1000 ;;  # the block results/paper-v3/simple ran on
+  confirm) runs=100 seed=1000 ;;  # the block results/paper/simple ran on
   screen-hard) runs=20 seed=0 map=pinball_hard_two_starts ;;
-  confirm-hard) runs=100 seed=1000 map=pinball_hard_two_starts ;;  # results/paper-v3/hard: 1000-1059
+  confirm-hard) runs=100 seed=1000 map=pinball_hard_two_starts ;;  # results/paper/hard: 1000-1099
   replicate) runs=100 seed=7000 episodes=60 every=20 ;;  # fresh: no run had used these seeds
   *) echo "run.sh: block must be screen, confirm, screen-hard, confirm-hard or replicate, got '$block'" >&2
      exit 2 ;;

@@ -1,7 +1,8 @@
 """Figure 6 and the hard instance's claims at the paper's 100 runs (issue 30).
 
 ``results/paper-v3/hard`` (then ``results/paper/hard``) ran 60 agents per kind (seeds
-1000-1059). A second study ran the next 40
+1000-1059). That study was removed from the tree: it is ``results/paper-v3`` in git at 6835785,
+restorable with ``git archive 6835785 results/paper-v3 | tar -x``. A second study ran the next 40
 (``skillchain reproduce paper --instances hard --hard-runs 40 --seed 1060``). By the seed
 contract agent ``p`` of a population started at seed ``S`` is the single agent with seed
 ``S + p`` (``skillchain verify``), so the two studies' rows stacked are exactly the 100-agent
@@ -10,7 +11,7 @@ seeds follow on), writes ``hard/<agent>/`` with the 100-run arrays and ``config.
 (``runs 100, seed 1000``: what ``skillchain verify`` replays, agents 60-99 included), and the
 report with Figure 6.
 
-    python results/paper-hard100/combine.py /work/runs/hard-extra      # the second study's dir
+    python results/paper-hard100/combine.py results/paper-v3 /work/runs/hard-extra  # first, second
 """
 
 from __future__ import annotations
@@ -65,18 +66,20 @@ def stack(first: Path, second: Path, out: Path) -> dict:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("first", type=Path, help="the study that ran the first 60 agents "
+                        "(its hard/<agent> folders)")
     parser.add_argument("second", type=Path, help="the study that ran the agents after the "
                         "first 60 (its hard/<agent> folders)")
     args = parser.parse_args(argv)
-    sys.path.insert(0, str(ROOT))
-    from trainers.study.paper_report import write_report
+    from skillchain_torch.trainers.study.paper_report import write_report
 
     for agent in AGENTS:
-        stack(ROOT / "results/paper-v3/hard" / agent, args.second / "hard" / agent,
+        stack(args.first.resolve() / "hard" / agent, args.second / "hard" / agent,
               HERE / "hard" / agent)
     write_report(HERE, names=[f"hard/{a}" for a in AGENTS], quiet=True)
-    # Figures 7 and 8 need a skill-chaining checkpoint; results/paper-v3 has them at 60 runs.
+    # Figures 7 and 8 need a skill-chaining checkpoint; the first study has them at 60 runs.
     for stale in ("fig7.png", "fig8.png"):
         if (HERE / stale).is_file():
             (HERE / stale).unlink()

@@ -2,6 +2,9 @@
 folder with its ``report.json``): the default's, the paper preset's, the previous default's.
 
     python results/paper/compare_studies.py results/paper results/paper-preset results/paper-v3
+
+The previous default's study, ``results/paper-v3``, is in git at 6835785 (removed from the tree),
+restorable with ``git archive 6835785 results/paper-v3 | tar -x``.
 """
 
 from __future__ import annotations

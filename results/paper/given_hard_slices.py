@@ -49,7 +49,6 @@ ARRAYS = ("returns.npy", "lengths.npy")  # what a given-options run writes
 
 
 def _experiments():
-    sys.path.insert(0, str(ROOT))
     from skillchain_torch.trainers.study.reproduce import paper_experiments
 
     return {e.agent: e for e in paper_experiments(instances=("hard",))}

@@ -16,19 +16,13 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import given_hard_slices as slices  # this folder's slice script (run as a script: on sys.path)
 import numpy as np
 
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
+from skillchain_torch.trainers.study.paper_report import WINDOWS, _fmt_diff, window
+
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE), str(HERE.parents[1])]
-import given_hard_slices as slices  # noqa: E402  (this folder's slice script)
-
-from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci  # noqa: E402
-from skillchain_torch.trainers.study.paper_report import (  # noqa: E402
-    WINDOWS,
-    _fmt_diff,
-    window,
-)
-
 K12 = HERE.parent / "paper-k12" / "hard" / "given-options"
 
 

@@ -34,7 +34,6 @@ RUNS = ("end-outside-k48-seeds1000-1049", "end-outside-k48-seeds1050-1074",
 
 
 def main() -> None:
-    sys.path.insert(0, str(ROOT))
     from skillchain_torch.trainers.config.config import TrainConfig
     from skillchain_torch.trainers.distributed.block_merge import merge_blocks
     from skillchain_torch.trainers.distributed.blocks import ShardedRun, block_config

@@ -1,14 +1,23 @@
 """Confirmation on seeds 1000-1029: the paper study's first 30 agents (order 4) against order 5.
 
-    python results/runaway/confirm_table.py
+The order-4 study is the one the order-5 runs were made against: ``results/paper-v3`` in git at
+6835785 (removed from the tree), restorable with ``git archive 6835785 results/paper-v3 | tar -x``.
+
+    python results/runaway/confirm_table.py results/paper-v3
 """
+import argparse
+
 import numpy as np
 
 from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
 from skillchain_torch.trainers.study.paper_report import WINDOWS, window
 
-RUNS = {"flat o4": "results/paper-v3/simple/flat",
-        "sc o4": "results/paper-v3/simple/skill-chaining",
+parser = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+parser.add_argument("study", help="the order-4 study's folder (its simple/<agent> folders)")
+study = parser.parse_args().study
+RUNS = {"flat o4": f"{study}/simple/flat",
+        "sc o4": f"{study}/simple/skill-chaining",
         "flat o5": "results/runaway/confirm/flat-o5",
         "sc o5": "results/runaway/confirm/sc-o5"}
 PAIRS = [("sc o4", "flat o4"), ("sc o5", "flat o5"), ("flat o5", "flat o4"), ("sc o5", "sc o4")]

@@ -1,12 +1,16 @@
 """Trace one flat agent's long episode with its Q values, and draw where it spent it.
 
-    python results/runaway/trap.py results/paper-v3/simple/flat 13 249
+    python results/runaway/trap.py results/paper/simple/flat 13 249
 
 re-runs the published agent alone to that episode (checked bit for bit against the run's
 lengths), records per step the observation, the reward, Q(s, .) before the update and the
 action, prints where the steps went and how the values fell, and writes
 trap_o<order>_<agent>_<episode>.png beside this script (the path coloured by step, and Q(s, a)
 against the step).
+
+(The README's traces were made from ``results/paper-v3``, in git at 6835785 and restorable with
+``git archive 6835785 results/paper-v3 | tar -x``; its ``simple/flat`` is the same run, config
+and arrays, as ``results/paper/simple/flat``.)
 """
 import dataclasses
 import sys

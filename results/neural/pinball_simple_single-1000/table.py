@@ -1,8 +1,11 @@
 """Pinball's neural runs (seeds 1000-1009) against the paper study's first 10 agents of the
-same seeds (``results/paper-v3/simple``: flat and the default's skill chaining, agents 0-9 are
+same seeds (``results/paper/simple``: flat and the default's skill chaining, agents 0-9 are
 seeds 1000-1009 by the seed contract), and the paper preset's linear skill chaining on those
 seeds (``results/option-learning/confirm/paper-k48``, agents 0-9, episodes 1-50).
-Prints the README's table; 95% Student-t intervals over runs, Welch for differences.
+Prints the README's table; 95% Student-t intervals over runs, Welch for differences. (The
+README's table was made from ``results/paper-v3/simple``, in git at 6835785, restorable with
+``git archive 6835785 results/paper-v3 | tar -x``: the same flat runs, and the then default's
+skill chaining, so its "sc-linear (default)" row differs from what this prints.)
 
     python results/neural/pinball_simple_single-1000/table.py
 """

@@ -11,18 +11,33 @@ fresh-seed check; the sd ratio against flat over 201-250; executions' outcomes; 
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
-from compare import WINDOWS  # noqa: E402  (this study's scripts)
-from slots import fmt  # noqa: E402
+from skillchain_torch.trainers.study.intervals import mean_ci
 
-from skillchain_torch.trainers.study.intervals import mean_ci  # noqa: E402
+HERE = Path(__file__).resolve().parent
+
+
+def _script(name: str):
+    """``results/option-learning/<name>.py`` (this study's scripts), loaded as a module."""
+    spec = importlib.util.spec_from_file_location(name, HERE.parent / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+compare = _script("compare")
+WINDOWS = compare.WINDOWS
+
+
+def fmt(mean: float, half: float) -> str:
+    """``slots.fmt``: the interval, starred where it excludes 0."""
+    return compare.fmt(mean, half) + (" *" if abs(mean) > half else "")
 
 PAPER = HERE.parents[1] / "paper" / "hard"  # flat
 K12 = HERE.parents[1] / "paper-k12" / "hard"  # the default's 12 slots, same seeds

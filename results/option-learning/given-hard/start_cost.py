@@ -27,21 +27,27 @@ Example (a minute)::
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import torch
 
-ROOT = Path(__file__).resolve().parents[3]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "results" / "option-learning"))  # execution_ends
+from skillchain_torch.trainers.config.config import TrainConfig
+from skillchain_torch.trainers.loop.population import PopulationTrainer
 
-from execution_ends import KINDS as END_KINDS  # noqa: E402
-from execution_ends import end_kinds  # noqa: E402
 
-from skillchain_torch.trainers.config.config import TrainConfig  # noqa: E402
-from skillchain_torch.trainers.loop.population import PopulationTrainer  # noqa: E402
+def _script(name: str):
+    """``results/option-learning/<name>.py`` (the study's scripts), loaded as a module."""
+    path = Path(__file__).resolve().parents[1] / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_ends = _script("execution_ends")
+END_KINDS, end_kinds = _ends.KINDS, _ends.end_kinds
 
 KINDS = ("option", "primitive_covered", "primitive_uncovered")
 # execution_ends.KINDS under this script's names (terminated and truncated: one episode end)

@@ -9,9 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[3]
-SCRIPT = ROOT / "results" / "paper" / "given_hard_slices.py"
-TABLE = ROOT / "results" / "paper" / "given_hard_table.py"
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+SCRIPT = HERE / "given_hard_slices.py"
+TABLE = HERE / "given_hard_table.py"
 
 
 @pytest.fixture()
