@@ -26,6 +26,7 @@ from skillchain_torch.agents import HierarchicalAgent
 from skillchain_torch.agents.hierarchical import OBS_DIM
 from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.options import OptionBank, OptionStatus
+from skillchain_torch.options.goals import env_goal, goal_event
 from skillchain_torch.trainers.config.config import TrainConfig
 
 __all__ = ["GivenOptionsAgent", "load_given_options"]
@@ -139,5 +140,6 @@ class GivenOptionsAgent(HierarchicalAgent):
                          interruption=cfg.option_interruption,
                          end_outside_set=cfg.end_outside_set,
                          overlap=True,  # as the options were learned (no-op if unrelated)
-                         completion_reward=cfg.completion_reward, native=native)
+                         completion_reward=cfg.completion_reward, native=native,
+                         events=(goal_event(cfg.goal or env_goal(cfg.env) or "terminated"),))
         self.config = cfg

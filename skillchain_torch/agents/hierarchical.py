@@ -111,6 +111,7 @@ from skillchain_torch.options import (
     OptionStatus,
     TerminationPredicate,
 )
+from skillchain_torch.options.goals import goal_event
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.presets import (
     PRESET_FIELDS,
@@ -421,7 +422,7 @@ class HierarchicalAgent(nn.Module):
             terminated, truncated = terminated & stepped, truncated & stepped
             next_obs = torch.where(stepped[:, None], next_obs, self.obs)
         contains_next = self.membership(next_obs)
-        reached = self.targets(next_obs, terminated, contains_next)
+        reached = self.targets(next_obs, terminated, contains_next, reward)
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
         own_next = torch.where(stepped[:, None], self._raw_contains, self.own_contains)
         if self.native:  # the rest in one compiled pass, on the declared StepState
@@ -612,8 +613,10 @@ class HierarchicalAgent(nn.Module):
             return contains
         return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
 
-    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
-        """``[P, K]``: each live option's termination predicate (target event) at ``s'``.
+    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor,
+                reward: Tensor | None = None) -> Tensor:  # fmt: skip
+        """``[P, K]``: each live option's termination predicate (target event) at ``s'``
+        (``reward``: the transition's, for a goal over the transition).
 
         A chained option's target is its parent's own initiation set (the classifier's, as in
         discovery), not the parent's set narrowed by the no-overlap rule."""
@@ -625,8 +628,8 @@ class HierarchicalAgent(nn.Module):
             used = int(bank.target_event.max())
             raise ValueError(f"target event {used} used by a slot, but only {len(self.events)} "
                              f"given")  # fmt: skip
-        return target_indicator(bank, evaluate_base_events(self.events, next_obs, terminated),
-                                raw)  # fmt: skip
+        fired = evaluate_base_events(self.events, next_obs, terminated, reward)
+        return target_indicator(bank, fired, raw)
 
     def _best_decision(self) -> Tensor:
         """``[P]``: ``max_d Q(s', d)`` over the decisions available at ``s'`` (``last_q``)."""
@@ -952,7 +955,9 @@ class SkillChainingAgent(HierarchicalAgent):
                 (:mod:`~skillchain_torch.agents.pieces`: the paper's ``"fourier"``,
                 ``"fourier"``, ``"logistic"`` by default, or ``"mlp"``); ``top_learner`` (a dict)
                 goes to the top-level piece's builder (``"mlp"``: ``lr``, ``target_update``,
-                ``bootstrap``); the rest go to the
+                ``bootstrap``); ``goal`` (``"terminated-positive"``, ``"MODULE:FUNCTION"`` or
+                an event: :mod:`~skillchain_torch.options.goals`) replaces the env's
+                ``terminated`` as the goal; the rest go to the
                 constructor (``events``, ``native``, ``reading``, ...) and win over the preset.
 
         Example:
@@ -1005,12 +1010,18 @@ class SkillChainingAgent(HierarchicalAgent):
                                     p.initiation_constrain, p.one_class_fits)  # fmt: skip
         if p.subgoals not in SUBGOALS:
             raise ValueError(f"subgoals must be one of {', '.join(SUBGOALS)}, got {p.subgoals!r}")
+        goal = kwargs.pop("goal", None)  # an event or its name; None: the env's terminated
+        goal = goal_event(goal) if isinstance(goal, str) else goal
+        if goal is not None and "events" in kwargs:
+            raise ValueError("give the goal as goal= or as the first of events=, not both")
         if p.subgoals == "random":  # the control: the goal, and random discs for the rest
             if "events" in kwargs:
                 raise ValueError("subgoals 'random' draws its own events; leave events out")
-            kwargs["events"] = (GoalEvent(), *random_subgoals(population, p.slots - 1, seed,
-                                                              map, device=device))
+            kwargs["events"] = (goal or GoalEvent(), *random_subgoals(
+                population, p.slots - 1, seed, map, device=device))
             kwargs["chaining"] = False
+        elif goal is not None:
+            kwargs["events"] = (goal,)
         arguments = dict(
             order=order if p.order is None else p.order,
             alpha=alpha if p.alpha is None else p.alpha, gamma=p.gamma, epsilon=p.epsilon,
@@ -1031,10 +1042,11 @@ class SkillChainingAgent(HierarchicalAgent):
     def narrow(self, contains: Tensor) -> Tensor:
         return self.discovery.membership(contains)
 
-    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
+    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor,
+                reward: Tensor | None = None) -> Tensor:  # fmt: skip
         # Targets are the classifiers' own sets at s' (kept by membership), not the effective
         # ones in ``contains`` (see SkillChaining.membership).
-        return self.discovery.targets(next_obs, terminated, self.discovery.last_raw)
+        return self.discovery.targets(next_obs, terminated, self.discovery.last_raw, reward)
 
     def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
         super()._start_decisions(obs, rows)

@@ -9,17 +9,23 @@ maps, epsilon 0.01, gamma 1); options with an order-3 Fourier Q-head (epsilon 0.
 ``config.option_alpha``), logistic initiation sets (2nd-order features, eta = 0.1, 100 sweeps,
 the two classes weighted equally), ``config.gestation`` episodes of gestation,
 ``config.convergence_threshold`` twice, distance 0.1, branching 3, and ``config.slots`` option
-slots per agent. The goal is the only initial target event.
+slots per agent. The goal (``config.goal``, else the env's: :mod:`skillchain_torch.options.goals`)
+is the only initial target event.
 """
 
 from __future__ import annotations
 
+import logging
+
 import torch
 
 from skillchain_torch.agents import SkillChainingAgent
+from skillchain_torch.options.goals import env_goal, goal_event, goal_note
 from skillchain_torch.trainers.config.config import PRESET_CONFIG_FIELDS, TrainConfig
 
 __all__ = ["SkillChainingRunAgent"]
+
+logger = logging.getLogger("skillchain_torch.agents")
 
 
 class SkillChainingRunAgent(SkillChainingAgent):
@@ -40,10 +46,14 @@ class SkillChainingRunAgent(SkillChainingAgent):
         values = {name: getattr(cfg, name) for name in PRESET_CONFIG_FIELDS}
         learner = (dict(lr=cfg.top_lr, target_update=cfg.top_target_update,
                         bootstrap=cfg.top_bootstrap) if cfg.top_head == "mlp" else None)
+        note = goal_note(cfg.env)  # an env the library does not know: say what its goal is
+        if note:
+            logger.warning(note)
+        goal = goal_event(cfg.goal or env_goal(cfg.env))
         bank, arguments = SkillChainingAgent.build_arguments(
             cfg.runs, cfg.preset, seed=cfg.seed, device=device, map=cfg.map, native=native,
             obs_dim=cfg.obs_dim, num_actions=cfg.num_actions, top_head=cfg.top_head,
             option_head=cfg.option_head, initiation=cfg.initiation, top_learner=learner,
-            **values)  # fmt: skip
+            goal=goal, **values)  # fmt: skip
         super().__init__(bank, **arguments)
         self.config = cfg

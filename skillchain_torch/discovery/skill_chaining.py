@@ -247,12 +247,14 @@ class SkillChaining:
             self._exclusion = overlap_exclusion(self.bank)
         return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
 
-    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor) -> Tensor:
+    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor,
+                reward: Tensor | None = None) -> Tensor:  # fmt: skip
         """Every option's target event at ``s'`` ``[P, K]``; keeps the base events' values.
 
         ``contains``: the classifiers' own sets at ``s'`` (:attr:`last_raw`), not the
-        effective ones (see :meth:`membership`)."""
-        self._base_next = evaluate_base_events(self.events, next_obs, terminated)
+        effective ones (see :meth:`membership`); ``reward``: the transition's, for a goal over
+        the transition."""
+        self._base_next = evaluate_base_events(self.events, next_obs, terminated, reward)
         return target_indicator(self.bank, self._base_next, contains)
 
     def start_episodes(self, obs: Tensor, rows: Tensor) -> None:
@@ -641,14 +643,24 @@ def event_list(bank: OptionBank, num_base: int,
 
 
 def evaluate_base_events(events: Sequence[TerminationPredicate], obs: Tensor,
-                         terminated: Tensor) -> Tensor:  # fmt: skip
-    """``BoolTensor [P, E]``: every base event's indicator at ``obs [P, 4]``."""
+                         terminated: Tensor, reward: Tensor | None = None) -> Tensor:  # fmt: skip
+    """``BoolTensor [P, E]``: every base event's indicator at ``obs [P, 4]``; an event with
+    ``wants_reward`` (a goal over the transition, :mod:`~skillchain_torch.options.goals`) also
+    gets the transition's ``reward [P]``."""
     if not events:
         return torch.zeros(obs.shape[0], 0, dtype=torch.bool, device=obs.device)
     if len(events) == 1:  # the paper's goal alone, every step: a view, not a stack
-        fired = events[0](obs, terminated)
+        fired = _fire(events[0], obs, terminated, reward)
         return (fired if fired.device == obs.device else fired.to(obs.device)).unsqueeze(-1)
-    return torch.stack([e(obs, terminated).to(obs.device) for e in events], dim=-1)
+    return torch.stack([_fire(e, obs, terminated, reward).to(obs.device) for e in events],
+                       dim=-1)  # fmt: skip
+
+
+def _fire(event: TerminationPredicate, obs: Tensor, terminated: Tensor,
+          reward: Tensor | None) -> Tensor:  # fmt: skip
+    if getattr(event, "wants_reward", False):
+        return event(obs, terminated, reward)
+    return event(obs, terminated)
 
 
 def target_indicator(bank: OptionBank, base_fired: Tensor, contains: Tensor) -> Tensor:

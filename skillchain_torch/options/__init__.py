@@ -20,6 +20,7 @@ The intra-option Q-learning update lives in
 
 from skillchain_torch.options.bank import FORMAT_VERSION, OptionBank
 from skillchain_torch.options.examples import reservoir_uniform, store_places
+from skillchain_torch.options.goals import TransitionGoal, env_goal, goal_event
 from skillchain_torch.options.initiation import InitiationClassifier
 from skillchain_torch.options.io import register_classifier, register_q_head
 from skillchain_torch.options.logistic import logistic_sweeps
@@ -39,6 +40,9 @@ __all__ = [
     "FORMAT_VERSION",
     "FourierOptionQHead",
     "GoalEvent",
+    "TransitionGoal",
+    "env_goal",
+    "goal_event",
     "InitiationClassifier",
     "InitiationSetEvent",
     "LambdaEvent",

@@ -31,7 +31,7 @@ CONFIG_OPTIONS = (
     "keep_negatives", "store_failures", "constrain_nearest", "intra_option_primitives",
     "intra_option_target", "option_interruption", "end_outside_set", "policy_start",
     "value_start", "value_bonus", "option_alpha", "completion_reward", "gestation",
-    "convergence_threshold", "max_branching", "subgoals",
+    "convergence_threshold", "max_branching", "subgoals", "goal",
     *NEURAL_OPTIONS,
 )  # fmt: skip
 
@@ -70,6 +70,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="train on a Gymnasium env through TorchRL's GymEnv instead of Pinball: "
         "gymnasium:MountainCar-v0, or gymnasium:MODULE:ID for an env your module registers "
         "(observation size, bounds and action count come from its specs)",
+    )
+    train.add_argument(
+        "--goal", default=None, metavar="NAME",
+        help="the goal event options are built towards: terminated (the env's own "
+        "termination), terminated-positive (terminated with a positive last reward: "
+        "LunarLander's landing, not its crash), or MODULE:FUNCTION of the transition's "
+        "TensorDict (default: the env's, terminated on Pinball, MountainCar and Acrobot; "
+        "CartPole has none and needs one for skill chaining)",
     )
     train.add_argument(
         "--obs-bounds", default=None, metavar="LOW:HIGH,...",

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from skillchain_torch.discovery.subgoals import SUBGOALS
+from skillchain_torch.options.goals import env_goal, goal_event
 from skillchain_torch.presets import PRESET_FIELDS, preset_named
 from skillchain_torch.resources import device_problem
 from skillchain_torch.resources import format_bytes as _size
@@ -206,6 +207,16 @@ def check_values(config) -> None:
                           f"value_start other than 'agent' (they read the linear head), got "
                           f"{config.policy_start!r} and {config.value_start!r}: add --preset "
                           "paper", ("top_head", "policy_start", "value_start"))  # fmt: skip
+    if config.agent == "skill-chaining" and config.goal is None and env_goal(config.env) is None:
+        raise ConfigError(f"env {config.env} terminates only in failure (its last reward is "
+                          "positive too), so no termination is a goal for skill chaining: pass "
+                          "--goal MODULE:FUNCTION, a function of the transition's TensorDict "
+                          "that holds where success is", ("goal",))  # fmt: skip
+    if config.goal is not None:
+        try:
+            goal_event(config.goal)
+        except ValueError as err:
+            raise ConfigError(str(err), ("goal",)) from None
     if config.options_agent is not None:
         checks.append(("options_agent", config.options_agent, config.options_agent >= 0, ">= 0"))
     if config.alpha is not None:

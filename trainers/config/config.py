@@ -137,6 +137,10 @@ class TrainConfig:
             twice in a row (paper: 0.15).
         max_branching: (preset) options per target event (paper: 3; 0 creates none: the
             same agent and learners without options, a flat baseline for any head).
+        goal: the goal event (:mod:`skillchain_torch.options.goals`): ``"terminated"``,
+            ``"terminated-positive"`` or ``"MODULE:FUNCTION"`` of the transition's TensorDict
+            (``None``: the env's own, :func:`~skillchain_torch.options.goals.env_goal`; an env
+            whose termination means failure, CartPole, needs one for skill chaining).
         subgoals: (preset) where new options aim: ``"chained"`` (the paper's: the sets of the
             options already there) or ``"random"`` (issue 52's control: the goal and
             ``slots - 1`` random discs, :mod:`skillchain_torch.discovery.subgoals`).
@@ -202,6 +206,7 @@ class TrainConfig:
     convergence_threshold: float | None = None
     max_branching: int | None = None
     subgoals: str | None = None
+    goal: str | None = None
 
     env: str | None = None
     obs_bounds: str | None = None

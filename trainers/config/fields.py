@@ -20,7 +20,7 @@ LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_neg
                  "top_head": "fourier", "option_head": "fourier", "initiation": "logistic",
                  "max_branching": 3, "top_lr": 1e-3, "top_target_update": 250,
                  "top_bootstrap": "sarsa", "epsilon_init": None, "annealing_steps": 0,
-                 "subgoals": "chained"}
+                 "subgoals": "chained", "goal": None}
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
@@ -43,7 +43,7 @@ MLP_TOP_FIELDS = ("top_lr", "top_target_update", "top_bootstrap")
 _PIECES = ("top_head", "option_head", "initiation", *MLP_TOP_FIELDS, "epsilon_init",
            "annealing_steps")
 UNREAD_FIELDS = {
-    "flat": _DISCOVERY_FIELDS + _PIECES + ("options", "options_agent", "failure_bootstrap",
+    "flat": _DISCOVERY_FIELDS + _PIECES + ("options", "options_agent", "failure_bootstrap", "goal",
                                            "completion_reward", "intra_option_primitives",
                                            "intra_option_target",
                                            "option_interruption", "end_outside_set"),
