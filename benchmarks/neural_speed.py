@@ -93,6 +93,41 @@ def agent_steps_per_second(env_id: str, population: int, steps: int, device: str
     return (trainer.agent_steps - before) / (time.perf_counter() - start)
 
 
+def flat_steps_per_second(population: int, steps: int, env_id: str | None = None) -> float:
+    """Linear flat Sarsa (``--agent flat``, Fourier order 4) at P agents: on Gymnasium's
+    ``env_id`` (MountainCar steps in one call: ``skillchain_torch.envs.classic``) or, with
+    ``None``, on Pinball's first instance."""
+    from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+
+    env = None if env_id is None else f"gymnasium:{env_id}"
+    trainer = PopulationTrainer(TrainConfig(agent="flat", env=env, runs=population,
+                                            episodes=10_000, seed=0))  # fmt: skip
+    trainer.train(max_agent_steps=min(steps, 50) * population)
+    before, start = trainer.agent_steps, time.perf_counter()
+    trainer.train(max_agent_steps=before + steps * population)
+    return (trainer.agent_steps - before) / (time.perf_counter() - start)
+
+
+def live_option_steps_per_second(env_id: str, population: int, steps: int, device: str,
+                                 budget: int = 200_000) -> tuple[float, bool]:  # fmt: skip
+    """Neural skill chaining's rate once every agent has a live option (trained until they
+    all do, or ``budget`` population steps): ``(agent steps/s, whether they all did)``."""
+    from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+
+    cfg = TrainConfig(agent="skill-chaining", preset="paper", env=f"gymnasium:{env_id}",
+                      runs=population, episodes=10_000, seed=0, device=device,
+                      top_head="mlp", option_head="mlp", initiation="mlp")  # fmt: skip
+    trainer = PopulationTrainer(cfg)
+    done = 0
+    while done < budget and not bool(trainer.agent.bank.live().any(-1).all()):
+        done += 1000
+        trainer.train(max_agent_steps=trainer.agent_steps + 1000 * population)
+    every = bool(trainer.agent.bank.live().any(-1).all())
+    before, start = trainer.agent_steps, time.perf_counter()
+    trainer.train(max_agent_steps=before + steps * population)
+    return (trainer.agent_steps - before) / (time.perf_counter() - start), every
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--env", default="MountainCar-v0")
@@ -100,6 +135,8 @@ def main(argv=None) -> None:
     parser.add_argument("--steps", type=int, default=1000, help="population steps timed")
     parser.add_argument("--dqn-steps", type=int, default=5000)
     parser.add_argument("--device", default="cpu")
+    parser.add_argument("--live-options", action="store_true",
+                        help="also time P = 100 once every agent has a live option (slow)")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     dqn = dqn_steps_per_second(args.env, args.dqn_steps, args.device)
@@ -109,6 +146,16 @@ def main(argv=None) -> None:
     for population in args.populations:
         rate = agent_steps_per_second(args.env, population, args.steps, args.device)
         print(f"| neural skill chaining, P = {population} | {rate:,.0f} | {rate / dqn:.2f}x |")
+    if args.live_options:
+        rate, every = live_option_steps_per_second(args.env, 100, args.steps, args.device)
+        label = "every agent with a live option" if every else "NOT every agent had an option"
+        print(f"| neural skill chaining, P = 100, {label} | {rate:,.0f} | {rate / dqn:.2f}x |")
+    # Linear flat Sarsa at P = 100 here against the same agent on Pinball (target: 15%).
+    pinball = flat_steps_per_second(100, args.steps)
+    here = flat_steps_per_second(100, args.steps, args.env)
+    print("\n| linear flat Sarsa, P = 100 | agent steps/s | / Pinball's |\n|---|---:|---:|")
+    print(f"| Pinball (pinball_simple_single) | {pinball:,.0f} | 100% |")
+    print(f"| {args.env} | {here:,.0f} | {100 * here / pinball:.1f}% |")
 
 
 if __name__ == "__main__":

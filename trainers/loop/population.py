@@ -50,6 +50,7 @@ import torch
 from tensordict import TensorDict
 
 from skillchain_torch.collectors import HierarchicalCollector
+from skillchain_torch.envs.classic import batched_stepper
 from skillchain_torch.envs.external import make_env, read_specs
 from skillchain_torch.envs.pinball import PinballEnv
 from skillchain_torch.envs.pinball.stepper import ActiveEnvStepper
@@ -147,6 +148,10 @@ class PopulationTrainer:
             protocol of :class:`~skillchain_torch.agents.FlatSarsaAgent`, e.g. a
             :class:`~skillchain_torch.agents.SkillChainingAgent` with your own pieces);
             ``None`` builds ``config.agent`` by name.
+        batched_envs: off Pinball, step the population's envs in one call where the env has
+            a batched stepper (:func:`~skillchain_torch.envs.classic.batched_stepper`:
+            MountainCar, the same numbers as Gymnasium's); ``False`` steps one ``GymEnv`` per
+            agent whatever the env.
 
     Example:
         >>> trainer = PopulationTrainer(TrainConfig(runs=2, episodes=1, max_episode_steps=5))
@@ -157,10 +162,11 @@ class PopulationTrainer:
     """
 
     def __init__(self, config: TrainConfig, out_dir: str | Path | None = None,
-                 num_threads: int | None = 1, native: bool | None = None, agent=None):
+                 num_threads: int | None = 1, native: bool | None = None, agent=None,
+                 batched_envs: bool = True):
         if config.env is not None:  # the env's sizes from its specs, before the defaults
-            envs = [make_env(config.env) for _ in range(config.runs)]
-            sizes = read_specs(envs[0], config.obs_bounds)
+            first = make_env(config.env)
+            sizes = read_specs(first, config.obs_bounds)
             config = with_env_sizes(config, sizes)
         config = config.resolved().validate()
         self.config = config
@@ -172,10 +178,15 @@ class PopulationTrainer:
                                   dtype=torch.float64, max_episode_steps=config.max_episode_steps,
                                   seed=config.seed)  # fmt: skip
             self.stepper = ActiveEnvStepper(self.env, native=native)
-        else:
-            self.env = envs
-            self.stepper = EnvStepper(envs, sizes, seed=config.seed,
+        else:  # the env's own batched stepper where it has one, else one GymEnv per agent
+            batched = batched_stepper(config.env, config.runs, sizes, seed=config.seed,
                                       max_episode_steps=config.max_episode_steps)
+            if batched is not None and batched_envs:
+                self.env, self.stepper = None, batched
+            else:
+                self.env = [first] + [make_env(config.env) for _ in range(config.runs - 1)]
+                self.stepper = EnvStepper(self.env, sizes, seed=config.seed,
+                                          max_episode_steps=config.max_episode_steps)
         self.user_agent = agent is not None  # built by the user: config.json says so
         if agent is None:
             agent = make_agent(config, device=self.device, native=native)

@@ -57,6 +57,12 @@ _SECTIONS = {
 }
 
 
+# The env section of the steppers other than Pinball's: EnvStepper (a Gymnasium/TorchRL env's
+# counters only) and the batched MountainCar (envs/classic.py: its whole state).
+_ENV_KINDS = {"torchrl-envs": ("index", "step_count"),
+              "mountain-car": ("index", "step_count", "position", "velocity", "rngs")}
+
+
 class DamagedCheckpoint(ValueError):
     """A checkpoint file that cannot be trusted: unreadable, truncated, not a checkpoint,
     missing fields, or failing its digest (as opposed to one of another version or config)."""
@@ -135,8 +141,8 @@ def read_checkpoint(path: str | Path) -> dict:
         raise DamagedCheckpoint(f"{path}: unknown field {str(unknown[0])[:40]!r}: the file was "
                                 "altered or damaged after it was written")
     for section, keys in _SECTIONS.items():
-        if section == "env" and state["env"].get("kind") == "torchrl-envs":
-            keys = ("index", "step_count")  # (EnvStepper: a Gymnasium/TorchRL env's counters)
+        if section == "env" and state["env"].get("kind") in _ENV_KINDS:
+            keys = _ENV_KINDS[state["env"]["kind"]]  # (an env stepper other than Pinball's)
         if section == "agent" and state["trainer"].get("user_agent"):
             keys = ()  # a user's agent (interfaces.EpisodeAgent) saves what it declares
         for key in keys:
