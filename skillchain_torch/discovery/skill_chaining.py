@@ -186,7 +186,8 @@ class SkillChaining:
         if policy_start != "zero" and (top_basis is None
                                        or getattr(bank.q_head, "basis", None) is None):
             raise ValueError(f"policy_start {policy_start!r} needs the agent's Fourier basis "
-                             "(top_basis) and a Fourier option head (FourierOptionQHead)")
+                             "(top_basis) and a Fourier option head (FourierOptionQHead): use "
+                             "policy_start='zero' (--policy-start zero) with any other head")
         self.policy_start, self.top_basis = policy_start, top_basis
         self.completion_reward = float(completion_reward)
         self._projection: Tensor | None = None

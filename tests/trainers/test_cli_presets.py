@@ -214,3 +214,15 @@ def test_subgoals_random_reaches_the_agent_and_a_bad_value_is_one_line(capsys):
     with pytest.raises(SystemExit):
         build_parser().parse_args(["train", "--subgoals", "nearby"])
     assert "invalid choice: 'nearby'" in capsys.readouterr().err
+
+
+def test_a_neural_option_head_under_the_default_names_the_flag_that_fixes_it(capsys, tmp_path):
+    """Issue 53: the default starts options from the top level in the Fourier option basis, so
+    an MLP option head needs --policy-start zero, and the error says so in one line."""
+    with pytest.raises(SystemExit):
+        main(["train", "--agent", "skill-chaining", "--option-head", "mlp", "--runs", "1",
+              "--episodes", "1", "--out", str(tmp_path / "run")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "add --policy-start zero" in err
+    with pytest.raises(ValueError, match=r"--policy-start zero"):
+        SkillChainingAgent.build(1, option_head="mlp", order=1)

@@ -217,6 +217,12 @@ def check_values(config) -> None:
             goal_event(config.goal)
         except ValueError as err:
             raise ConfigError(str(err), ("goal",)) from None
+    if config.agent == "skill-chaining" and config.option_head != "fourier" and (
+            config.policy_start != "zero"):  # fmt: skip
+        raise ConfigError(f"option_head {config.option_head!r} needs policy_start 'zero' (the "
+                          f"copy of the top level is made in the Fourier option basis), got "
+                          f"{config.policy_start!r}: add --policy-start zero",
+                          ("option_head", "policy_start"))  # fmt: skip
     if config.options_agent is not None:
         checks.append(("options_agent", config.options_agent, config.options_agent >= 0, ">= 0"))
     if config.alpha is not None:
