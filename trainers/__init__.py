@@ -41,6 +41,8 @@ _EXPORTS = {
     "plot_learning_curve": "outputs.plots",
     "save_learning_curve": "outputs.plots",
     "summarize": "study.summary",
+    "load_run": "study.evaluate",
+    "evaluate": "study.evaluate",
     "DiscoveryLog": "outputs.discovery_log",
     "option_tree": "outputs.discovery_log",
     "greedy_trajectory": "outputs.option_trajectory",

@@ -249,8 +249,44 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--ray-address", default=None, metavar="ADDR",
                        help="the Ray cluster to use (default: RAY_ADDRESS, else a local Ray)")
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
+    evaluate = sub.add_parser(
+        "eval",
+        help="run a trained run's agents greedily and print their returns",
+        description="Load RUN_DIR's agents from its last checkpoint, freeze them (no learning, "
+        "no discovery) and run --episodes episodes each, greedy unless --epsilon, every episode "
+        "cut at --max-steps; print each agent's mean return and the mean over agents with its "
+        "95%% interval. --render FILE.gif draws one agent's episodes.",
+    )
+    evaluate.add_argument("dir", type=Path, help="run directory (with checkpoints/)")
+    evaluate.add_argument("--episodes", type=_positive, default=10,
+                          help="episodes per agent (default 10)")
+    evaluate.add_argument("--epsilon", type=float, default=0.0,
+                          help="exploration while evaluating (default 0: greedy)")
+    evaluate.add_argument("--max-steps", type=_positive, default=10_000,
+                          help="steps per episode at most (default 10,000: a greedy agent can "
+                          "circle forever)")
+    evaluate.add_argument("--seed", type=int, default=None,
+                          help="the evaluation's own streams (default: the run's seed + 1,000,000)")
+    evaluate.add_argument("--render", type=Path, default=None, metavar="FILE.gif",
+                          help="also draw one agent's episodes (Pinball, or a Gymnasium env "
+                          "with rgb_array frames)")
+    evaluate.add_argument("--agent-index", type=int, default=0,
+                          help="the agent --render draws (default 0)")
+    evaluate.add_argument("--render-episodes", type=_positive, default=1,
+                          help="episodes --render draws (default 1)")
+    evaluate.add_argument("--quiet", action="store_true", help="no progress bar")
+    plot = sub.add_parser(
+        "plot",
+        help="draw several runs' learning curves in one figure and print their window table",
+        description="Learning curves of finished runs with 95%% bands in one figure (--out), "
+        "and a table per episode window: each run's mean with its 95%% t interval and each "
+        "run minus the first with Welch's 95%% interval (*: it excludes 0).",
+    )
+    from skillchain_torch.trainers.study.compare import add_plot_arguments
+
+    add_plot_arguments(plot)
     parser.commands = {"train": train, "summarize": summary, "reproduce": reproduce,
-                       "verify": verify, "sweep": sweep}
+                       "verify": verify, "sweep": sweep, "eval": evaluate, "plot": plot}
     return parser
 
 

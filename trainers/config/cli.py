@@ -58,7 +58,37 @@ def main(argv: list[str] | None = None) -> int:
         return _verify(command, args)
     if args.command == "sweep":
         return _sweep(command, args)
+    if args.command == "eval":
+        return _eval(command, args)
+    if args.command == "plot":
+        from skillchain_torch.trainers.study.compare import run_plot
+
+        return run_plot(command, args)
     return _train(command, args)
+
+
+def _eval(parser, args) -> int:
+    from skillchain_torch.trainers.study.evaluate import evaluate, load_run, render_episodes
+
+    if not 0.0 <= args.epsilon <= 1.0:
+        parser.error(f"--epsilon must be in [0, 1], got {args.epsilon}")
+    try:
+        run = load_run(args.dir)
+        if not 0 <= args.agent_index < run.config.runs:
+            parser.error(f"--agent-index must be in [0, {run.config.runs - 1}], got "
+                         f"{args.agent_index}")  # fmt: skip
+        result = evaluate(run, episodes=args.episodes, epsilon=args.epsilon,
+                          max_steps=args.max_steps, seed=args.seed, quiet=args.quiet)
+        print(f"{args.dir}: {run.config.agent} agents from {run.checkpoint.name}")
+        print(result.table())
+        if args.render is not None:
+            path = render_episodes(run, args.render, agent_index=args.agent_index,
+                                   episodes=args.render_episodes, epsilon=args.epsilon,
+                                   max_steps=args.max_steps, seed=args.seed)
+            print(f"animation: {path}")
+    except (ValueError, TypeError) as err:
+        parser.error(_one_line(err))
+    return 0
 
 
 def _reproduce(parser, args) -> int:
