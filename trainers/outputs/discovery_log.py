@@ -45,9 +45,11 @@ from skillchain_torch.trainers.outputs.timed import TimedHook
 __all__ = ["DiscoveryLog", "option_tree"]
 
 
-def option_tree(agent) -> dict:
+def option_tree(agent, slot_outcomes: np.ndarray | None = None) -> dict:
     """Every agent's options: slot, parent slot (-1: a base event), target name, creation
-    episode (0-based), status name and depth, as a JSON-ready dict."""
+    episode (0-based), status name and depth, as a JSON-ready dict; with ``slot_outcomes``
+    (``[P, K, 3]``, :attr:`DiscoveryLog.slot_outcomes`) also each option's executions over the
+    run: ``successes``, ``timeouts``, ``episode_ends``."""
     bank, discovery = agent.bank, agent.discovery
     status = bank.status.cpu().tolist()
     parent = bank.parent.cpu().tolist()
@@ -58,7 +60,10 @@ def option_tree(agent) -> dict:
         options = [
             {"slot": k, "parent": parent[p][k], "target": discovery.target_name(p, k),
              "created_episode": created[p][k], "status": OptionStatus(status[p][k]).name,
-             "depth": depth[p][k]}
+             "depth": depth[p][k],
+             **({} if slot_outcomes is None else dict(zip(
+                 ("successes", "timeouts", "episode_ends"),
+                 (int(n) for n in slot_outcomes[p, k]))))}
             for k in range(bank.slots) if status[p][k] != OptionStatus.EMPTY
         ]  # fmt: skip
         agents.append({"agent": p, "options": options,
@@ -82,6 +87,7 @@ class DiscoveryLog(TimedHook):
         self.image_resolution = int(image_resolution)
         self.n_options: np.ndarray | None = None
         self.outcomes: np.ndarray | None = None
+        self.slot_outcomes: np.ndarray | None = None  # [P, K, 3]: each option's, whole run
         self.totals: Counter = Counter()
         self._map = None
         self.seconds = 0.0  # wall time in the hooks (recorded in run_info.json)
@@ -94,6 +100,9 @@ class DiscoveryLog(TimedHook):
             self.n_options = np.full((P, E), -1, dtype=np.int64)
         if self.outcomes is None:
             self.outcomes = np.zeros((P, E, len(OUTCOMES)), dtype=np.int64)
+        if self.slot_outcomes is None:
+            K = trainer.agent.bank.slots
+            self.slot_outcomes = np.zeros((P, K, len(OUTCOMES)), dtype=np.int64)
         self._map = getattr(trainer.env, "pinball_map", None)
         trainer.register_op("post_episodes", self.post_episodes, name=name)
         trainer.register_op("post_train", self.post_train, name=name)
@@ -103,8 +112,9 @@ class DiscoveryLog(TimedHook):
         agent = trainer.agent
         live = agent.bank.live().sum(-1).cpu().numpy()
         self.n_options[batch.agents, batch.episodes] = live[batch.agents]
-        last = agent.discovery.counts.last_outcomes.sum(1).cpu().numpy()  # [P, 3]
-        self.outcomes[batch.agents, batch.episodes] = last[batch.agents]
+        per_slot = agent.discovery.counts.last_outcomes.cpu().numpy()  # [P, K, 3]
+        self.outcomes[batch.agents, batch.episodes] = per_slot.sum(1)[batch.agents]
+        np.add.at(self.slot_outcomes, batch.agents, per_slot[batch.agents])
         events = agent.discovery.drain()
         self.totals.update(e.kind for e in events)
         if self.logger is None:
@@ -154,12 +164,16 @@ class DiscoveryLog(TimedHook):
 
     def state_dict(self) -> dict:
         return {"n_options": torch.from_numpy(self.n_options.copy()),
-                "outcomes": torch.from_numpy(self.outcomes.copy()), "totals": dict(self.totals)}
+                "outcomes": torch.from_numpy(self.outcomes.copy()),
+                "slot_outcomes": torch.from_numpy(self.slot_outcomes.copy()),
+                "totals": dict(self.totals)}  # fmt: skip
 
     def load_state_dict(self, state: dict) -> None:
         self.n_options = state["n_options"].numpy().copy()
         if "outcomes" in state:  # (not in checkpoints saved before the counts were kept)
             self.outcomes = state["outcomes"].numpy().copy()
+        if "slot_outcomes" in state:  # (nor before each option's were)
+            self.slot_outcomes = state["slot_outcomes"].numpy().copy()
         self.totals = Counter(state["totals"])
 
 

@@ -33,6 +33,7 @@ OUTPUTS = (
     "n_options.npy",
     "option_outcomes.npy",
     "option_tree.json",
+    "option_tree.png",
     "option_trajectory.png",
     "diverged.json",  # a diverged run's returns so far (PopulationTrainer.DIVERGED_OUTPUTS)
     "partial_returns.npy",
@@ -181,8 +182,8 @@ def _read_commit() -> str | None:
 
 
 def write_discovery(trainer, discovery, out: Path) -> None:
-    """``options.pt`` (every agent's bank), ``n_options.npy``, ``option_outcomes.npy`` and
-    ``option_tree.json``."""
+    """``options.pt`` (every agent's bank), ``n_options.npy``, ``option_outcomes.npy``,
+    ``option_tree.json`` and its figure ``option_tree.png``."""
     import numpy as np
 
     from skillchain_torch.trainers.outputs.discovery_log import option_tree
@@ -191,7 +192,11 @@ def write_discovery(trainer, discovery, out: Path) -> None:
     trainer.agent.bank.save(out / "options.pt")
     np.save(out / "n_options.npy", discovery.n_options)
     np.save(out / "option_outcomes.npy", discovery.outcomes)
-    (out / "option_tree.json").write_text(json.dumps(option_tree(trainer.agent), indent=1) + "\n")
+    tree = option_tree(trainer.agent, discovery.slot_outcomes)
+    (out / "option_tree.json").write_text(json.dumps(tree, indent=1) + "\n")
+    from skillchain_torch.trainers.outputs.tree_figure import save_option_tree
+
+    save_option_tree(tree, out / "option_tree.png")
     if trainer.config.env is not None:  # Figure 4b off Pinball: observation dims 0 and 1
         from skillchain_torch.trainers.outputs.env_trajectory import (
             best_env_trajectory,
