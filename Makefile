@@ -9,10 +9,15 @@ VENV := .venv
 PY := $(VENV)/bin/python
 TORCH_PIN := torch==2.13.0
 
-$(VENV)/.installed: pyproject.toml
+# What running needs (make demo), then what testing adds (make test: pytest, ruff, Ray, ...).
+$(VENV)/.installed-run: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --no-cache-dir --upgrade pip
 	$(PY) -m pip install --quiet --no-cache-dir $(TORCH_PIN)
+	$(PY) -m pip install --quiet --no-cache-dir -e .
+	touch $@
+
+$(VENV)/.installed: $(VENV)/.installed-run
 	$(PY) -m pip install --quiet --no-cache-dir -e ".[dev,bench]"
 	touch $@
 
@@ -25,9 +30,9 @@ test: $(VENV)/.installed
 lint: $(VENV)/.installed
 	$(VENV)/bin/ruff check .
 
-demo: $(VENV)/.installed
+demo: $(VENV)/.installed-run
 	$(VENV)/bin/skillchain train --agent skill-chaining --map pinball_simple_single --runs 4 --episodes 30 --seed 0 --out runs/demo --overwrite
-	@echo "TensorBoard: $(VENV)/bin/tensorboard --logdir runs/demo/tb ; figures: runs/demo/learning_curve.png runs/demo/option_trajectory.png"
+	@echo "TensorBoard: $(VENV)/bin/tensorboard --logdir runs/demo/tb ; figures: runs/demo/learning_curve.png runs/demo/option_tree.png runs/demo/option_trajectory.png"
 
 bench: $(VENV)/.installed
 	$(PY) benchmarks/env_throughput.py

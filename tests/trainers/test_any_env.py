@@ -162,7 +162,7 @@ def test_cli_env_flags(tmp_path, capsys):
     assert config["map"] is None  # a Pinball map it never read is not recorded
     for argv, message in (
         (["--env", MOUNTAIN_CAR, "--map", "pinball_simple_single"], "choose the environment"),
-        (["--env", "MountainCar-v0"], "gymnasium:ID"),
+        (["--env", "NoSuchEnv-v0"], "cannot make"),  # a bare id is Gymnasium's (issue 54)
         (["--env", "gymnasium:NoSuchEnv-v0"], "cannot make"),
         (["--obs-bounds", "0:1"], "applies to --env only"),
     ):

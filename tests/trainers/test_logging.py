@@ -58,7 +58,7 @@ def test_scalars(logged_run):
 
 def test_progress_bar(logged_run):
     _, _, text = logged_run
-    assert "9/9" in text and "ret=" in text and "steps_s=" in text
+    assert "9/9" in text and "mean return of the last" in text and "agent steps/s" in text
 
 
 def test_population_interval_and_curve():

@@ -67,9 +67,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--env", default=None, metavar="gymnasium:ID",
-        help="train on a Gymnasium env through TorchRL's GymEnv instead of Pinball: "
-        "gymnasium:MountainCar-v0, or gymnasium:MODULE:ID for an env your module registers "
-        "(observation size, bounds and action count come from its specs)",
+        help="train on a Gymnasium env instead of Pinball: MountainCar-v0 (or "
+        "gymnasium:MountainCar-v0), or gymnasium:MODULE:ID for an env your module registers "
+        "(observation size, bounds and action count come from its specs; MountainCar steps "
+        "as one batch, others through TorchRL's GymEnv)",
     )
     train.add_argument(
         "--goal", default=None, metavar="NAME",
@@ -202,9 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
                            help="runs per agent on the first instance (default 100)")
     reproduce.add_argument("--episodes", type=_positive, default=250,
                            help="episodes per run (default 250)")
-    reproduce.add_argument("--hard-runs", type=_positive, default=100,
-                           help="runs per agent on the second instance (default 100, the "
-                           "paper's count)")
+    reproduce.add_argument("--hard-runs", type=_positive, default=None,
+                           help="runs per agent on the second instance (default: --runs)")
     reproduce.add_argument("--hard-episodes", type=_positive, default=None,
                            help="episodes per run on the second instance (default: --episodes)")
     reproduce.add_argument("--seed", type=int, default=1000,

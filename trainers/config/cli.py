@@ -40,9 +40,24 @@ from skillchain_torch.trainers.outputs.run_outputs import source_commit, train_a
 
 __all__ = ["main", "build_parser"]
 
+def _attach_values(argv: list[str], flags: tuple[str, ...] = ("--obs-bounds",)) -> list[str]:
+    """``--obs-bounds -2.4:2.4,...`` as ``--obs-bounds=-2.4:2.4,...``: argparse takes a value
+    that starts with ``-`` for a flag, and the bounds' error message writes them this way."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] in flags and i + 1 < len(argv) and argv[i + 1].startswith("-") \
+                and ":" in argv[i + 1]:
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(argv[i])
+        i += 1
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_attach_values(list(sys.argv[1:] if argv is None else argv)))
     command = parser.commands[args.command]  # its errors are one line (arguments.Parser)
     if args.command == "summarize":
         from skillchain_torch.trainers.study.summary import summarize_dir

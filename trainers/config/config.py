@@ -144,7 +144,8 @@ class TrainConfig:
         subgoals: (preset) where new options aim: ``"chained"`` (the paper's: the sets of the
             options already there) or ``"random"`` (issue 52's control: the goal and
             ``slots - 1`` random discs, :mod:`skillchain_torch.discovery.subgoals`).
-        env: ``None`` for Pinball (``map``), else ``"gymnasium:ID"`` or
+        env: ``None`` for Pinball (``map``), else ``"gymnasium:ID"`` (a bare ``"ID"`` is
+            read as Gymnasium's) or
             ``"gymnasium:MODULE:ID"``: a Gymnasium env through TorchRL's ``GymEnv`` (see
             :mod:`skillchain_torch.envs.external`).
         obs_bounds: ``"LOW:HIGH,..."`` per observation dim, where the env's spec has no
@@ -222,6 +223,9 @@ class TrainConfig:
     annealing_steps: int = 0
 
     def __post_init__(self):
+        if isinstance(self.env, str) and self.env and ":" not in self.env:
+            # A bare Gymnasium id (CartPole-v1) is Gymnasium's: recorded with its prefix.
+            object.__setattr__(self, "env", "gymnasium:" + self.env)
         if self.env is None and self.map is None:
             object.__setattr__(self, "map", DEFAULT_MAP)
         elif self.env is not None and self.map is not None:

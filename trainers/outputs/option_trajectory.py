@@ -34,8 +34,9 @@ __all__ = ["greedy_trajectory", "greedy_trajectories", "best_greedy_trajectory",
            "plot_option_trajectory", "save_option_trajectory", "OPTION_COLORS"]  # fmt: skip
 
 # Distinct colours for option slots; primitives are black.
+# (No olive beside gold, no grey: each slot's colour stands apart from the others and from black.)
 OPTION_COLORS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:cyan",
-                 "tab:pink", "tab:olive", "tab:brown", "gold", "lime", "navy")  # fmt: skip
+                 "tab:pink", "tab:brown", "magenta", "lime", "navy", "teal")  # fmt: skip
 
 
 def _single_agent(agent, p: int, epsilon: float = 0.0, seed: int = 0) -> HierarchicalAgent:
@@ -256,11 +257,14 @@ def plot_option_trajectory(run: dict, map_name: str, ax=None, title: str | None 
     used = sorted(set(int(k) for k in options))
     handles = [Line2D([], [], color="black" if k < 0 else OPTION_COLORS[k % len(OPTION_COLORS)],
                       label="primitive actions" if k < 0 else f"option {k}") for k in used]
-    ax.legend(handles=handles, loc="lower left", fontsize=7, framealpha=0.8)
+    # Below the map, not over it: a legend box over the start once greyed the path under it.
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.06), fontsize=7,
+              ncol=min(4, len(handles)), frameon=False)  # fmt: skip
     steps = len(options)
-    kind = "greedy" if not run.get("epsilon") else f"epsilon {run['epsilon']:g}"
-    ax.set_title(title or f"agent {run['agent']}: {kind} solution, {steps} steps, "
-                 f"return {run['return']:,.0f}", fontsize=9)  # fmt: skip
+    kind = ("a greedy episode" if not run.get("epsilon")
+            else f"an episode exploring at epsilon {run['epsilon']:g}, as in training")
+    ax.set_title(title or f"agent {run['agent']}: {kind}\n{steps} steps, return "
+                 f"{run['return']:,.0f}; colour: the option in control", fontsize=9)  # fmt: skip
     return ax
 
 

@@ -69,14 +69,43 @@ def plot_learning_curve(returns, ax=None, label: str | None = None, color: str |
     return ax
 
 
-def save_learning_curve(returns, path: str | Path, title: str | None = None) -> Path:
-    """Write the learning-curve figure to ``path`` (PNG through matplotlib's Agg backend)."""
+def save_learning_curve(returns, path: str | Path, title: str | None = None,
+                        reference: tuple[str, np.ndarray] | None = None) -> Path:
+    """Write the learning-curve figure to ``path`` (PNG through matplotlib's Agg backend).
+
+    ``reference``: ``(label, returns)`` of another run drawn beside it on the same episodes
+    (the demo draws the committed flat study's), so that learning is visible against it. With
+    few runs a 95% band can span far beyond the curves; the axis then follows the means, and
+    the figure says that the band is cut."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7, 4.5))
     FigureCanvasAgg(fig)
-    plot_learning_curve(returns, ax=fig.add_subplot(), title=title)
+    ax = fig.add_subplot()
+    returns = np.asarray(returns, dtype=np.float64)
+    means = [learning_curve(returns)]
+    if reference is not None:
+        label, ref = reference
+        ref = np.asarray(ref, dtype=np.float64)[:, :returns.shape[1]]
+        plot_learning_curve(ref, ax=ax, label=label, color="0.45")
+        means.append(learning_curve(ref))
+    plot_learning_curve(returns, ax=ax, title=title, color="C0",
+                        label=f"this run, mean of {returns.shape[0]} runs")
+    handles, labels = ax.get_legend_handles_labels()
+    keep = [i for i, text in enumerate(labels) if text != "95% interval"]
+    ax.legend([handles[i] for i in keep], [labels[i] for i in keep], loc="lower right",
+              title="mean, 95% band")
+    finite = [m[np.isfinite(m)] for m, _, _ in means]
+    low_band = min(float(np.nanmin(lo)) for _, lo, _ in means)
+    high_band = max(float(np.nanmax(hi)) for _, _, hi in means)
+    if all(f.size for f in finite):
+        lo, hi = min(float(f.min()) for f in finite), max(float(f.max()) for f in finite)
+        pad = 0.15 * max(hi - lo, 1.0)
+        if low_band < lo - 2 * pad or high_band > hi + 2 * pad:  # a band far wider than the means
+            ax.set_ylim(lo - pad, hi + pad)
+            ax.text(0.01, 0.99, "axis follows the means; the 95% band is cut",
+                    transform=ax.transAxes, va="top", fontsize=8, color="0.3")
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=120)

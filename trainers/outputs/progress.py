@@ -59,8 +59,11 @@ class ProgressBar:
         if now - self._last_refresh >= self.min_interval:
             self._last_refresh = now
             mean = sum(self.recent) / len(self.recent)
-            self.bar.set_postfix(ret=f"{mean:.0f}", steps_s=f"{trainer.steps_per_second():.0f}",
-                                 active=trainer.num_active, refresh=False)
+            # Labelled in words: what the return is a mean of, and what the rates count.
+            self.bar.set_postfix_str(
+                f"mean return of the last {len(self.recent)} episodes {mean:,.0f}, "
+                f"{trainer.steps_per_second():,.0f} agent steps/s, "
+                f"{trainer.num_active} agents training", refresh=False)
 
     def post_train(self, trainer) -> None:
         self.close()

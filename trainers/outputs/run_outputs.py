@@ -111,6 +111,7 @@ def train_and_write(trainer, out: str | Path, quiet: bool = False) -> int:
         trainer.returns,
         out / "learning_curve.png",
         title=f"{agent_label(trainer)} on {cfg.env_name} ({cfg.runs} runs)",
+        reference=None if cfg.agent == "flat" else committed_flat(cfg),
     )
     info = {
         "wall_time_s": trainer.elapsed,
@@ -179,6 +180,25 @@ def _read_commit() -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return head + ("+dirty" if dirty else "")
+
+
+def committed_flat(config) -> tuple[str, object] | None:
+    """``(label, returns)`` of the committed flat study on ``config``'s Pinball map
+    (``results/paper/<instance>/flat``, beside the package in a clone), or ``None``."""
+    import numpy as np
+
+    if config.env is not None:
+        return None
+    root = Path(__file__).resolve().parents[2] / "results" / "paper"
+    for folder in (root / "simple" / "flat", root / "hard" / "flat"):
+        try:
+            saved = json.loads((folder / "config.json").read_text())
+            if saved.get("map") == config.map:
+                returns = np.load(folder / "returns.npy")
+                return (f"flat Sarsa, results/paper ({returns.shape[0]} runs)", returns)
+        except (OSError, ValueError):
+            continue
+    return None
 
 
 def write_discovery(trainer, discovery, out: Path) -> None:

@@ -77,7 +77,7 @@ class Experiment:
         return self.name.split("/")[1]
 
 
-def paper_experiments(runs: int = 100, episodes: int = 250, hard_runs: int = 100,
+def paper_experiments(runs: int = 100, episodes: int = 250, hard_runs: int | None = None,
                       hard_episodes: int | None = None, seed: int = 1000,
                       instances=("simple", "hard"), **reading) -> list[Experiment]:  # fmt: skip
     """The paper's runs: flat, skill chaining and given options on each instance.
@@ -90,7 +90,7 @@ def paper_experiments(runs: int = 100, episodes: int = 250, hard_runs: int = 100
     for instance in instances:
         if instance not in INSTANCES:
             raise ValueError(f"unknown instance {instance!r}; known: {', '.join(INSTANCES)}")
-        n = runs if instance == "simple" else hard_runs
+        n = runs if instance == "simple" or hard_runs is None else hard_runs
         e = episodes if instance == "simple" or hard_episodes is None else hard_episodes
         base = TrainConfig(map=INSTANCES[instance], runs=n, episodes=e, seed=seed, **reading)
         sc = f"{instance}/skill-chaining"
@@ -331,12 +331,14 @@ def run_experiments(experiments: list[Experiment], out: str | Path, jobs: int = 
     return states
 
 
-def reproduce_paper(out: str | Path, runs: int = 100, episodes: int = 250, hard_runs: int = 100,
+def reproduce_paper(out: str | Path, runs: int = 100, episodes: int = 250,
+                    hard_runs: int | None = None,
                     hard_episodes: int | None = None, seed: int = 1000, jobs: int = 2,
                     instances=("simple", "hard"), quiet: bool = False,
                     report: bool = True, **reading) -> Path:  # fmt: skip
     """Run (or finish) every experiment, then write the figures and ``out/README.md``.
 
+    ``hard_runs`` ``None``: ``runs`` on the second instance too.
     ``reading``: :class:`TrainConfig` fields every run takes instead of the defaults, e.g.
     ``preset="paper", slots=48`` for the study under every value the paper states::
 

@@ -1,0 +1,41 @@
+"""Issue 54's CLI items a new user hits first: bare Gymnasium ids, ``--obs-bounds`` written as
+the error message writes it, ``reproduce --runs`` on both instances, and a labelled progress
+bar (tests/trainers/test_logging.py)."""
+
+from __future__ import annotations
+
+import json
+
+from skillchain_torch.trainers import TrainConfig
+from skillchain_torch.trainers.config.arguments import build_parser
+from skillchain_torch.trainers.config.cli import _attach_values, main
+from skillchain_torch.trainers.study.reproduce import paper_experiments
+
+BOUNDS = "-2.4:2.4,-3:3,-0.21:0.21,-3.5:3.5"
+
+
+def test_a_bare_gymnasium_id_is_gymnasiums():
+    assert TrainConfig(env="CartPole-v1").env == "gymnasium:CartPole-v1"
+    assert TrainConfig(env="gymnasium:CartPole-v1").env == "gymnasium:CartPole-v1"
+    assert TrainConfig(env="gymnasium:my_module:Thing-v0").env == "gymnasium:my_module:Thing-v0"
+
+
+def test_obs_bounds_take_a_value_that_starts_with_a_minus(tmp_path):
+    assert _attach_values(["train", "--obs-bounds", BOUNDS, "--runs", "2"]) == \
+        ["train", f"--obs-bounds={BOUNDS}", "--runs", "2"]
+    assert _attach_values(["--runs", "-1"]) == ["--runs", "-1"]  # (only --obs-bounds)
+    out = tmp_path / "cp"
+    assert main(["train", "--env", "CartPole-v1", "--obs-bounds", BOUNDS, "--runs", "2",
+                 "--episodes", "2", "--out", str(out), "--quiet"]) == 0  # fmt: skip
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["env"] == "gymnasium:CartPole-v1" and saved["obs_bounds"] == BOUNDS
+
+
+def test_reproduce_runs_apply_to_both_instances_unless_hard_runs_is_given():
+    args = build_parser().parse_args(["reproduce", "paper", "--out", "x", "--runs", "2"])
+    assert args.hard_runs is None
+    runs = {e.config.map: e.config.runs for e in paper_experiments(runs=2, episodes=3)}
+    assert set(runs.values()) == {2} and len(runs) == 2
+    hard = {e.config.map: e.config.runs for e in paper_experiments(runs=2, episodes=3,
+                                                                   hard_runs=5)}  # fmt: skip
+    assert sorted(hard.values()) == [2, 5]
