@@ -39,3 +39,30 @@ def test_reproduce_runs_apply_to_both_instances_unless_hard_runs_is_given():
     hard = {e.config.map: e.config.runs for e in paper_experiments(runs=2, episodes=3,
                                                                    hard_runs=5)}  # fmt: skip
     assert sorted(hard.values()) == [2, 5]
+
+
+def test_config_file_toml_and_a_runs_config_json_with_flags_winning(tmp_path, capsys):
+    toml = tmp_path / "run.toml"
+    toml.write_text('agent = "skill-chaining"\nruns = 2\nepisodes = 2\nmap = "pinball_box"\n'
+                    'max_episode_steps = 200\ngestation = 3\n')  # fmt: skip
+    first = tmp_path / "first"
+    assert main(["train", "--config", str(toml), "--runs", "3", "--out", str(first),
+                 "--quiet"]) == 0  # fmt: skip
+    saved = json.loads((first / "config.json").read_text())
+    assert (saved["agent"], saved["runs"], saved["episodes"], saved["gestation"]) == \
+        ("skill-chaining", 3, 2, 3)  # the flag won, the file gave the rest
+    again = tmp_path / "again"
+    assert main(["train", "--config", str(first / "config.json"), "--episodes", "3",
+                 "--out", str(again), "--quiet"]) == 0  # fmt: skip
+    redone = json.loads((again / "config.json").read_text())
+    assert redone["episodes"] == 3 and {k: v for k, v in redone.items() if k != "episodes"} \
+        == {k: v for k, v in saved.items() if k != "episodes"}
+    bad = tmp_path / "bad.toml"
+    bad.write_text('agnt = "flat"\n')
+    for path, message in ((bad, "unknown field 'agnt'"), (tmp_path / "x.yaml", "expected a .json")):
+        try:
+            main(["train", "--config", str(path), "--out", str(tmp_path / "no")])
+        except SystemExit:
+            pass
+        err = capsys.readouterr().err.strip()
+        assert message in err and err.count("\n") == 0

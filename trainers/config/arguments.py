@@ -148,6 +148,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--threads", type=int, default=1, help="torch intra-op threads while training (default 1)"
     )
     train.add_argument("--out", type=Path, default=None, help="output directory")
+    train.add_argument("--config", type=Path, default=None, metavar="FILE",
+                       help="start from a run's config.json or a TOML file of TrainConfig "
+                       "fields (agent = \"skill-chaining\", runs = 20, ...); flags given here "
+                       "win over it")
     train.add_argument(
         "--resume",
         type=Path,

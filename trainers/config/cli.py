@@ -210,6 +210,13 @@ def _config_from_args(parser, args) -> TrainConfig:
         parser.error(", ".join(map(_flag, learner)) + " set the learner of --top-head mlp, "
                      "and the top level here is fourier (closed-form Sarsa): add --top-head mlp "
                      "or leave them out")  # fmt: skip
+    if getattr(args, "config", None) is not None:  # the file's values under the flags given
+        saved = {k: v for k, v in _read_config_file(parser, args.config).items()
+                 if v is not None}  # (None: left to the defaults, as a flag not given)
+        if "env" in given or "map" in given:  # a flag's environment replaces the file's
+            saved.pop("env", None), saved.pop("map", None), saved.pop("obs_bounds", None)
+            saved.pop("obs_dim", None), saved.pop("num_actions", None)
+        given = {**saved, **given}
     if "env" in given and "map" in given:
         parser.error("--env and --map choose the environment twice: give one (--map is Pinball's)")
     if "obs_bounds" in given and "env" not in given:
@@ -223,6 +230,32 @@ def _config_from_args(parser, args) -> TrainConfig:
         return config.validate().resolved()
     except ValueError as err:
         parser.error(_flag_message(err, given))
+
+
+def _read_config_file(parser, path: Path) -> dict:
+    """The fields of ``--config FILE``: a run's ``config.json`` (read as ``--resume`` reads it)
+    or a TOML table of :class:`TrainConfig` fields; one line naming the file otherwise."""
+    import dataclasses as dc
+
+    if path.suffix == ".json":
+        try:
+            return TrainConfig.load_json(path).to_dict()
+        except ValueError as err:
+            parser.error(f"--config {err}")
+    if path.suffix != ".toml":
+        parser.error(f"--config {path}: expected a .json (a run's config.json) or .toml file")
+    import tomllib
+
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        parser.error(f"--config {path}: cannot read it ({_one_line(err)})")
+    names = {f.name for f in dc.fields(TrainConfig)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        parser.error(f"--config {path}: unknown field {unknown[0]!r} (TrainConfig's fields are "
+                     f"the flags of skillchain train, with _ for -)")  # fmt: skip
+    return data
 
 
 def _one_line(message) -> str:

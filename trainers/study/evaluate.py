@@ -144,7 +144,7 @@ def evaluate(run: Run, episodes: int = 10, epsilon: float = 0.0, max_steps: int 
     if not quiet:
         from skillchain_torch.trainers.outputs.progress import ProgressBar
 
-        trainer.register_op("post_episode", ProgressBar(config))
+        ProgressBar().register(trainer)
     trainer.train()
     return Evaluation(np.asarray(trainer.returns), np.asarray(trainer.lengths), epsilon,
                       max_steps, seed)  # fmt: skip

@@ -88,3 +88,9 @@ def test_a_run_without_a_checkpoint_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "no checkpoint under" in err and "arrays and figures only" in err
     assert err.count("\n") == 0
+
+
+def test_eval_shows_a_progress_bar(sc_run, capsys):
+    out, _ = sc_run
+    assert main(["eval", str(out), "--episodes", "1", "--max-steps", "100"]) == 0
+    assert "3/3" in capsys.readouterr().err  # one episode of each of the 3 agents
