@@ -66,3 +66,18 @@ def test_config_file_toml_and_a_runs_config_json_with_flags_winning(tmp_path, ca
             pass
         err = capsys.readouterr().err.strip()
         assert message in err and err.count("\n") == 0
+
+
+def test_train_help_groups_its_flags_and_gives_every_default():
+    from skillchain_torch.trainers.config.arguments import TRAIN_GROUPS
+
+    train = build_parser().commands["train"]
+    titles = [g.title for g in train._action_groups]
+    assert [t for t, _, _ in TRAIN_GROUPS] == [t for t in titles if t in dict(
+        (t, 1) for t, _, _ in TRAIN_GROUPS)]  # fmt: skip
+    left = [a.dest for g in train._action_groups if g.title == "options"
+            for a in g._group_actions if a.dest != "help"]
+    assert left == [], left  # every flag sits in a named group
+    missing = [a.dest for a in train._actions if a.dest != "help" and "default" not in a.help]
+    assert missing == [], missing
+    assert all("reading:" not in a.help for a in train._actions if a.help)

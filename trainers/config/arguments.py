@@ -289,9 +289,76 @@ def build_parser() -> argparse.ArgumentParser:
     from skillchain_torch.trainers.study.compare import add_plot_arguments
 
     add_plot_arguments(plot)
+    group_train_flags(train)
     parser.commands = {"train": train, "summarize": summary, "reproduce": reproduce,
                        "verify": verify, "sweep": sweep, "eval": evaluate, "plot": plot}
     return parser
+
+
+# ``skillchain train --help`` in groups, each flag's default in words (issue 54: 58 flags in one
+# list, some without a default, some with jargon). Flags not named here stay in "options".
+TRAIN_GROUPS = (
+    ("run", "what to train and how long",
+     ("agent", "preset", "config", "runs", "episodes", "seed", "max_episode_steps")),
+    ("environment", "Pinball or a Gymnasium env, and its goal",
+     ("map", "env", "obs_bounds", "goal")),
+    ("agent", "the top level's learning (SMDP Sarsa over primitives and options)",
+     ("alpha", "epsilon", "gamma", "order", "scale_step_size", "failure_bootstrap",
+      "completion_reward", "intra_option_primitives", "intra_option_target",
+      "option_interruption", "end_outside_set", "options", "options_agent")),
+    ("discovery", "skill chaining: options, their initiation sets, gestation",
+     ("slots", "max_branching", "subgoals", "gestation", "convergence_threshold",
+      "option_alpha", "policy_start", "value_start", "value_bonus", "initiation_bias",
+      "initiation_centered", "gestation_positives", "initiation_start",
+      "initiation_constrain", "one_class_fits", "keep_negatives", "store_failures",
+      "constrain_nearest")),
+    ("neural", "neural pieces (skillchain_torch.agents.pieces)",
+     ("top_head", "option_head", "initiation", "top_lr", "top_target_update",
+      "top_bootstrap", "epsilon_init", "annealing_steps")),
+    ("output", "where results go, resuming, and how the run computes",
+     ("out", "resume", "overwrite", "checkpoint_every", "quiet", "device", "threads",
+      "torch_only", "workers", "block_size", "ray_address")),
+)
+_PLAIN_DEFAULTS = {"env": "none: Pinball", "obs_bounds": "the env's spec", "out": "none; "
+                   "required unless --resume", "config": "none", "resume": "none",
+                   "options": "none; required by --agent given-options",
+                   "annealing_steps": "0: no annealing"}
+
+
+def _words(value) -> str:
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return str(value)
+
+
+def group_train_flags(train: argparse.ArgumentParser) -> None:
+    """Move ``train``'s flags into :data:`TRAIN_GROUPS` and give each a default in words."""
+    from skillchain_torch.presets import DEFAULT, PAPER, PRESET_FIELDS
+
+    actions = {a.dest: a for a in train._actions}
+    for title, description, dests in TRAIN_GROUPS:
+        group = train.add_argument_group(title, description)
+        for dest in dests:
+            action = actions[dest]
+            for other in train._action_groups:
+                if action in other._group_actions:
+                    other._group_actions.remove(action)
+            group._group_actions.append(action)
+    for dest, action in actions.items():
+        if action.help in (None, argparse.SUPPRESS):
+            continue
+        action.help = action.help.replace("reading: ", "how the paper is read where it is "
+                                          "silent: ")  # fmt: skip
+        if "default" in action.help:
+            continue
+        if dest in PRESET_FIELDS:
+            ours, paper = getattr(DEFAULT, dest), getattr(PAPER, dest)
+            action.help += (f" (default {_words(ours)}; --preset paper: {_words(paper)})"
+                            if ours != paper else f" (default {_words(ours)})")
+        elif dest in _PLAIN_DEFAULTS:
+            action.help += f" (default: {_PLAIN_DEFAULTS[dest]})"
+        elif action.default is False:
+            action.help += " (default: off)"
 
 
 def _positive(text: str) -> int:
