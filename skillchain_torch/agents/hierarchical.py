@@ -77,20 +77,18 @@ from torch import Tensor, nn
 
 from skillchain_torch.backends import hierarchical as backend
 from skillchain_torch.backends.native import check_same_kernels
+from skillchain_torch.backends.select import discovery_rules
 from skillchain_torch.discovery import (
     CONVERGENCE_EPISODES,
     CONVERGENCE_THRESHOLD,
     GESTATION_EPISODES,
     MAX_BRANCHING,
     InitiationReading,
-    SkillChaining,
 )
 from skillchain_torch.discovery.readings import FIRST_READING
 from skillchain_torch.discovery.skill_chaining import (
     evaluate_base_events,
-    exclude_overlap,
     overlap_exclusion,
-    target_indicator,
 )
 from skillchain_torch.discovery.subgoals import SUBGOALS, random_subgoals
 from skillchain_torch.features import FourierBasis
@@ -298,6 +296,9 @@ class HierarchicalAgent(nn.Module):
             classifier.set_native(self.native)
         elif hasattr(classifier, "set_native"):
             classifier.set_native(bool(native) and self.native)
+        # Discovery's rules, and the target and no-overlap booleans the step reads: the torch
+        # path's, or with a compiled step their compiled twins (the same bits), chosen once.
+        self.rules = discovery_rules(self.native)
         self._exclusion = overlap_exclusion(self.bank) if overlap else None
         self.epsilon, self.option_epsilon = float(epsilon), float(option_epsilon)
         self.gamma = float(gamma)
@@ -611,7 +612,8 @@ class HierarchicalAgent(nn.Module):
         (skill chaining: its no-overlap rule, section 4.3)."""
         if self._exclusion is None:
             return contains
-        return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
+        return self.rules.exclude_overlap(contains, self._exclusion,
+                                          self.bank.classifier.trained)  # fmt: skip
 
     def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor,
                 reward: Tensor | None = None) -> Tensor:  # fmt: skip
@@ -629,7 +631,7 @@ class HierarchicalAgent(nn.Module):
             raise ValueError(f"target event {used} used by a slot, but only {len(self.events)} "
                              f"given")  # fmt: skip
         fired = evaluate_base_events(self.events, next_obs, terminated, reward)
-        return target_indicator(bank, fired, raw)
+        return self.rules.target_indicator(bank, fired, raw)
 
     def _best_decision(self) -> Tensor:
         """``[P]``: ``max_d Q(s', d)`` over the decisions available at ``s'`` (``last_q``)."""
@@ -919,7 +921,7 @@ class SkillChainingAgent(HierarchicalAgent):
                              f"FourierBasis, not {type(self.q_head).__name__} over "
                              f"{type(self.features).__name__}: use value_start='max-sample' "
                              "and policy_start='zero' (the paper's) with your own head")
-        self.discovery = SkillChaining(
+        self.discovery = self.rules(
             self.bank, self.events, gestation=gestation, max_branching=max_branching,
             convergence_threshold=convergence_threshold,
             convergence_episodes=convergence_episodes,

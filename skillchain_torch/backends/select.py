@@ -32,7 +32,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator, Mapping, Sequence
 
-__all__ = ["builtin_type_problems", "compiled", "same_bits_kernels"]
+__all__ = ["builtin_type_problems", "compiled", "discovery_rules", "same_bits_kernels"]
 
 
 def builtin_type_problems(pieces: Mapping[str, tuple[object, type]]) -> list[str]:
@@ -62,6 +62,27 @@ def compiled(native: bool | None, needs: Mapping[str, bool],
         raise ValueError(f"the compiled path cannot run: {'; '.join(missing)}; use "
                          "native=False (or leave it None) to take the torch path")
     return not missing if native is None else bool(native)
+
+
+def discovery_rules(native: bool) -> type:
+    """Skill chaining's rules for an agent whose step is compiled (``native``) or not: the
+    torch path's :class:`~skillchain_torch.discovery.SkillChaining`, or, for a compiled step
+    where the kernels are built, its subclass with the per-step bookkeeping compiled (the same
+    bits, :class:`~.compiled_discovery.CompiledSkillChaining`). Chosen once, when the agent
+    is built.
+
+    Example:
+        >>> discovery_rules(False).__name__
+        'SkillChaining'
+    """
+    from skillchain_torch.backends import discovery as kernels
+    from skillchain_torch.discovery.skill_chaining import SkillChaining
+
+    if not (native and kernels.NATIVE):  # (NATIVE: built, and not off for a comparison)
+        return SkillChaining
+    from skillchain_torch.backends.compiled_discovery import CompiledSkillChaining
+
+    return CompiledSkillChaining
 
 
 @contextlib.contextmanager

@@ -50,8 +50,6 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from skillchain_torch.backends import discovery as backend
-from skillchain_torch.backends import initiation as initiation_backend
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import (
     GoalEvent,
@@ -207,7 +205,7 @@ class SkillChaining:
         device = bank.status.device
         self.convergence = ConvergenceTest(P, K, convergence_threshold, convergence_episodes,
                                            device=device)  # fmt: skip
-        self.trace = ExecutionTrace(P, self.max_option_steps, bank.q_head, device=device)
+        self.trace = self.trace_class(P, self.max_option_steps, bank.q_head, device=device)
         self.episode = torch.zeros(P, dtype=torch.int64, device=device)  # 0-based, running
         self.base_now = torch.zeros(P, E, dtype=torch.bool, device=device)  # events at s
         # The classifiers' own sets at s, and at the state last evaluated (membership).
@@ -222,15 +220,10 @@ class SkillChaining:
         self.log: list[DiscoveryEvent] = []
         # The states each agent acted in this episode, for gestation positives (if any).
         n = reading.gestation_positives
-        self.recent = RecentStates(P, n, device=device, obs_dim=bank.obs_dim) if n > 0 else None
+        self.recent = (self.recent_class(P, n, device=device, obs_dim=bank.obs_dim)
+                       if n > 0 else None)  # fmt: skip
         self._base_next = self.base_now
         self._exclusion: Tensor | None = None
-        # Reused CPU arrays for what the compiled outcomes and triggers write and the step
-        # reads once (never kept), so they are not allocated every step.
-        b = dict(dtype=torch.bool)
-        self._outcomes_out = (torch.empty(P, dtype=torch.int64), torch.empty(P, **b),
-                              torch.empty(P, **b))  # fmt: skip
-        self._triggers_out = (torch.empty(P, E, **b), torch.empty(P, K, **b))
 
     # ------------------------------------------------------------------ evaluation
     def membership(self, contains: Tensor) -> Tensor:
@@ -246,7 +239,7 @@ class SkillChaining:
             return contains
         if self._exclusion is None:  # changes only when options are created
             self._exclusion = overlap_exclusion(self.bank)
-        return exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
+        return self.exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
 
     def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor,
                 reward: Tensor | None = None) -> Tensor:  # fmt: skip
@@ -256,7 +249,7 @@ class SkillChaining:
         effective ones (see :meth:`membership`); ``reward``: the transition's, for a goal over
         the transition."""
         self._base_next = evaluate_base_events(self.events, next_obs, terminated, reward)
-        return target_indicator(self.bank, self._base_next, contains)
+        return self.target_indicator(self.bank, self._base_next, contains)
 
     def start_episodes(self, obs: Tensor, rows: Tensor) -> None:
         """Agents ``rows [P]`` start an episode at ``obs [P, 4]``."""
@@ -300,29 +293,23 @@ class SkillChaining:
             must be re-evaluated by the caller: the new slot changed them, and
             :meth:`created_rows_evaluated` then takes their own sets).
         """
-        bank = self.bank
         raw_now, raw_next = self.raw_now, self.last_raw
         self.raw_now = torch.where(stepped[:, None], raw_next, raw_now)
         self._finish_executions(option, reached, duration, decision_ended & stepped,
                                 terminated)  # fmt: skip
         sample = value  # Q(s, d) of the decision in force
-        if backend.NATIVE and backend.applies(contains, stepped):  # the same rules, compiled
-            self.gestation_q, base_trig, slot_trig, self.base_now, any_listed, hits = (
-                backend.triggers(bank.parent, bank.target_event, bank.status,
-                                          self.base_now, self._base_next, raw_now,
-                                          raw_next, reached, stepped, sample,
-                                          self.gestation_q, self.max_branching,
-                                          self._triggers_out))  # fmt: skip
-            if self.recent is not None and hits is not None:  # (the hits of _gestation_hits)
-                self._gestation_positives(hits)
-            if not any_listed:  # only listed events create
-                return torch.zeros_like(stepped)
-            return self._create(base_trig, slot_trig, contains, option, sample)
+        return self._triggers(contains, option, sample, reached, stepped, raw_now, raw_next)
+
+    def _triggers(self, contains: Tensor, option: Tensor, sample: Tensor, reached: Tensor,
+                  stepped: Tensor, raw_now: Tensor, raw_next: Tensor) -> Tensor:  # fmt: skip
+        """Gestation samples and positives, the target events this transition entered, and
+        the creations they trigger (:meth:`after_transition`); the agents that created."""
+        bank = self.bank
         if self.recent is not None:  # before base_now moves on to s'
             self._gestation_positives(self._gestation_hits(raw_now, reached, stepped))
         gestating = bank.status == OptionStatus.GESTATING
         if bool(gestating.any()):
-            before = target_indicator(bank, self.base_now, raw_now)
+            before = self.target_indicator(bank, self.base_now, raw_now)
             fired = entered(before, reached) & gestating & stepped[:, None]
             self.gestation_q = torch.where(fired, torch.maximum(self.gestation_q, sample[:, None]),
                                            self.gestation_q)  # fmt: skip
@@ -414,7 +401,7 @@ class SkillChaining:
         hit = reached & gestating
         if not bool(hit.any()):  # the usual step: no target of a gestating option at s'
             return hit
-        before = target_indicator(self.bank, self.base_now, raw_now)
+        before = self.target_indicator(self.bank, self.base_now, raw_now)
         return entered(before, reached) & gestating & stepped[:, None]
 
     def _gestation_positives(self, hits: Tensor) -> None:
@@ -433,22 +420,10 @@ class SkillChaining:
     def _finish_executions(self, option: Tensor, reached: Tensor, duration: Tensor,
                            ended: Tensor, terminated: Tensor) -> None:  # fmt: skip
         """Examples, refits and dropped updates of the executions that ended."""
-        if backend.NATIVE and backend.applies(option, reached):  # the same outcomes, compiled
-            slot, success, failure, any_ended, any_failure = backend.outcomes(
-                option, reached, duration, ended, terminated, self.max_option_steps,
-                self._outcomes_out)  # fmt: skip
-            if not any_ended:
-                return
-        else:
-            ended = ended & (option >= 0)
-            if not bool(ended.any()):
-                return
-            slot = option.clamp(min=0)
-            hit = reached.gather(1, slot[:, None])[:, 0]
-            success, failure = execution_outcome(hit, duration, terminated,
-                                                 self.max_option_steps)  # fmt: skip
-            success, failure = success & ended, failure & ended
-            any_failure = bool(failure.any())
+        outcomes = self._outcomes(option, reached, duration, ended, terminated)
+        if outcomes is None:
+            return
+        slot, success, failure, any_failure = outcomes
         timeout = failure & (duration >= self.max_option_steps)
         self.counts.add(ended & (option >= 0), slot, success, timeout, failure & ~timeout,
                         duration)  # fmt: skip
@@ -465,10 +440,23 @@ class SkillChaining:
         if any_failure:
             self.trace.drop_updates(slot, failure)
 
+    def _outcomes(self, option: Tensor, reached: Tensor, duration: Tensor, ended: Tensor,
+                  terminated: Tensor) -> tuple[Tensor, Tensor, Tensor, bool] | None:  # fmt: skip
+        """``(slot, success, failure [P], any failure)`` of the executions that ended, or
+        ``None`` where none did (:func:`execution_outcome`)."""
+        ended = ended & (option >= 0)
+        if not bool(ended.any()):
+            return None
+        slot = option.clamp(min=0)
+        hit = reached.gather(1, slot[:, None])[:, 0]
+        success, failure = execution_outcome(hit, duration, terminated, self.max_option_steps)
+        success, failure = success & ended, failure & ended
+        return slot, success, failure, bool(failure.any())
+
     def _create(self, base_trig: Tensor, slot_trig: Tensor, contains: Tensor, option: Tensor,
                 sample: Tensor) -> Tensor:  # fmt: skip
         bank = self.bank
-        base_on, slot_on = event_list(bank, len(self.events), self.max_branching)
+        base_on, slot_on = self.event_list(bank, len(self.events), self.max_branching)
         # An agent whose slots are full creates nothing; once its first blocked creation is
         # logged its triggers need no more work. (Late in a run every agent is full, and some
         # agent enters a learned option's set at nearly every step.)
@@ -634,9 +622,6 @@ def event_list(bank: OptionBank, num_base: int,
     A base event is listed until ``max_branching`` options target it; slot j's initiation set
     is listed once the option is LEARNED, until ``max_branching`` options target it.
     """
-    if backend.NATIVE and backend.applies(bank.status):
-        return backend.event_list(bank.parent, bank.target_event, bank.status,
-                                           num_base, max_branching)  # fmt: skip
     base, slot = targeting(bank, num_base)
     base_on = base.sum(1) < max_branching
     slot_on = (bank.status == OptionStatus.LEARNED) & (slot.sum(1) < max_branching)
@@ -670,9 +655,6 @@ def target_indicator(bank: OptionBank, base_fired: Tensor, contains: Tensor) -> 
 
     The same answer as :meth:`OptionBank.target_reached`, without evaluating any event again.
     """
-    if backend.NATIVE and backend.applies(contains, bank.status):
-        return backend.target_indicator(bank.parent, bank.target_event, bank.status,
-                                                 base_fired, contains)  # fmt: skip
     chained = bank.parent >= 0
     from_parent = contains.gather(1, bank.parent.clamp(min=0))
     if base_fired.shape[1] == 0:
@@ -814,8 +796,6 @@ def exclude_overlap(contains: Tensor, exclusion: Tensor, trained: Tensor) -> Ten
         >>> exclude_overlap(raw, overlap_exclusion(bank), bank.classifier.trained).tolist()
         [[True, False, True]]
     """
-    if backend.NATIVE and backend.applies(contains, exclusion):
-        return backend.exclude_overlap(contains, exclusion, trained)
     blocking = contains & trained  # [P, J]
     excluded = (exclusion & blocking[:, None, :]).any(-1)
     return contains & ~excluded
@@ -843,7 +823,6 @@ def exclude_overlap(contains: Tensor, exclusion: Tensor, trained: Tensor) -> Ten
 #   cut it short: it was not given its 250 steps, so it teaches nothing either way.
 
 
-OBS_DIM = 4
 
 def execution_outcome(reached: Tensor, duration: Tensor, terminated: Tensor,
                       max_steps: int) -> tuple[Tensor, Tensor]:  # fmt: skip
@@ -893,9 +872,6 @@ class ExecutionTrace:
     def start(self, rows: Tensor, slot: Tensor) -> None:
         """Agents in ``rows [P]`` start executing option ``slot [P]``: keep its weights."""
         tensors = self.q_head.slot_tensors()
-        if all(backend.copy_slots(value, rows, slot, self.snapshot[name], False)
-               for name, value in tensors.items()):  # fmt: skip
-            return  # one compiled copy per tensor
         index = rows.nonzero()[:, 0]
         if index.numel() == 0:
             return
@@ -906,10 +882,6 @@ class ExecutionTrace:
 
     def record(self, rows: Tensor, step: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` as step ``step [P]`` (0-based)."""
-        if (self.states.dtype == torch.float64 and self.states.shape[-1] == OBS_DIM
-                and backend.NATIVE and backend.applies(self.states, rows)):  # fmt: skip
-            backend.record(self.states, rows, step, obs)
-            return
         index = rows.nonzero()[:, 0]
         self.states[index, step[index].clamp(max=self.max_steps - 1)] = obs[index].to(
             self.states.dtype)
@@ -931,17 +903,7 @@ class ExecutionTrace:
     def store_examples(self, classifier: InitiationClassifier, slot: Tensor, duration: Tensor,
                        success: Tensor, failure: Tensor) -> Tensor:  # fmt: skip
         """Add the :meth:`examples` of ended executions to ``classifier`` (slot ``slot [P]``
-        of each agent); the ``[P, K]`` mask of slots that received data.
-
-        A compiled classifier stores them straight from the trace (the same examples in the
-        same order, so the same stores)."""
-        if (getattr(classifier, "native", False) and self.states.dtype == torch.float64
-                and self.states.shape[-1] == OBS_DIM):  # fmt: skip (the built-in's kernel)
-            touched = torch.zeros(classifier.population, classifier.slots, dtype=torch.bool)
-            initiation_backend.store_executions(classifier.stores, self.states, slot, duration,
-                                                success, failure, touched)  # fmt: skip
-            classifier.dirty |= touched
-            return touched
+        of each agent); the ``[P, K]`` mask of slots that received data."""
         agents, slots, obs, labels = self.examples(slot, duration, success, failure)
         if agents.numel() == 0:  # (trained: the [P, K] mask every InitiationSet declares)
             return torch.zeros_like(classifier.trained)
@@ -949,10 +911,6 @@ class ExecutionTrace:
 
     def drop_updates(self, slot: Tensor, failure: Tensor) -> None:
         """Put the options of failed executions back as they were when they started."""
-        tensors = self.q_head.slot_tensors()
-        if all(backend.copy_slots(value, failure, slot, self.snapshot[name], True)
-               for name, value in tensors.items()):  # fmt: skip
-            return
         self.q_head.write_slots(slot, self.snapshot, failure)
 
     def state_dict(self) -> dict:
@@ -1054,8 +1012,6 @@ class RecentStates:
 
     def record(self, rows: Tensor, obs: Tensor) -> None:
         """Agents in ``rows [P]`` act in ``obs [P, 4]`` (the state a transition starts from)."""
-        if backend.NATIVE and backend.record_ring(self.states, self.steps, rows, obs):
-            return  # the same writes, compiled (this runs every step)
         index = rows.nonzero()[:, 0]
         if index.numel() == 0:
             return
@@ -1086,3 +1042,13 @@ class RecentStates:
         self.states = state["states"].to(device).clone()
         self.steps = state["steps"].to(device).clone()
 
+
+
+# The rules' bookkeeping, one implementation per class. These are the torch path's;
+# skillchain_torch.backends.discovery.CompiledSkillChaining replaces them (the same bits), and
+# the agent's one call to skillchain_torch.backends.select.discovery_rules picks the class.
+SkillChaining.trace_class = ExecutionTrace
+SkillChaining.recent_class = RecentStates
+SkillChaining.target_indicator = staticmethod(target_indicator)
+SkillChaining.event_list = staticmethod(event_list)
+SkillChaining.exclude_overlap = staticmethod(exclude_overlap)
