@@ -21,7 +21,7 @@ $(VENV)/.installed: $(VENV)/.installed-run
 	$(PY) -m pip install --quiet --no-cache-dir -e ".[dev,bench]"
 	touch $@
 
-.PHONY: install test demo lint bench
+.PHONY: install test demo lint bench docs
 install: $(VENV)/.installed
 
 test: $(VENV)/.installed
@@ -29,6 +29,10 @@ test: $(VENV)/.installed
 
 lint: $(VENV)/.installed
 	$(VENV)/bin/ruff check .
+
+# The API reference from the docstrings (Sphinx), warnings as errors: docs/_build/html/index.html
+docs: $(VENV)/.installed
+	$(VENV)/bin/sphinx-build -W --keep-going -b html docs docs/_build/html
 
 demo: $(VENV)/.installed-run
 	$(VENV)/bin/skillchain train --agent skill-chaining --map pinball_simple_single --runs 4 --episodes 30 --seed 0 --out runs/demo --overwrite

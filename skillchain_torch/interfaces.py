@@ -7,20 +7,20 @@ and a compiled backend (:mod:`skillchain_torch.backends`) runs only where a piec
 the built-in class it replaces (a subclass, or any other class, takes the torch path, so an
 override is never bypassed).
 
-====================  ==========================================  ===========================
-interface             the paper's implementation                  shapes
-====================  ==========================================  ===========================
-:class:`InitiationSet`  :class:`~skillchain_torch.options.          ``obs [P, D] -> [P, K]``
-                      InitiationClassifier` (logistic, 5.1)
-:class:`OptionHead`   :class:`~skillchain_torch.options.           ``obs [P, D] -> [P, K, A]``
-                      FourierOptionQHead` (Fourier, Q-learning)
-:class:`ValueHead`    :class:`~skillchain_torch.modules.           ``phi [P, F] -> [P, 5 + K]``
-                      LinearQHead` (the top level, SMDP Sarsa)
-:class:`TerminationPredicate`  :class:`~skillchain_torch.options.  ``obs [P, D] -> [P]``
-                      GoalEvent`, ``InitiationSetEvent``
-:class:`Learner`      :class:`~skillchain_torch.objectives.        a TD step on a head
-                      SarsaUpdate`, ``IntraOptionQLearning``
-====================  ==========================================  ===========================
+============================== ======================================== ===========================
+interface                      the paper's implementation               shapes
+============================== ======================================== ===========================
+:class:`InitiationSet`         :class:`~.options.InitiationClassifier`  ``obs [P, D] -> [P, K]``
+                               (logistic, 5.1)
+:class:`OptionHead`            :class:`~.options.FourierOptionQHead`    ``obs [P, D] -> [P, K, A]``
+                               (Fourier, Q-learning)
+:class:`ValueHead`             :class:`~.modules.LinearQHead`           ``phi [P, F] -> [P, 5 + K]``
+                               (the top level, SMDP Sarsa)
+:class:`TerminationPredicate`  :class:`~.options.GoalEvent`,            ``obs [P, D] -> [P]``
+                               ``InitiationSetEvent``
+:class:`Learner`               :class:`~.objectives.SarsaUpdate`,       a TD step on a head
+                               ``IntraOptionQLearning``
+============================== ======================================== ===========================
 
 ``P`` agents of a population, ``K`` option slots per agent, ``D`` observation dims, ``A``
 primitive actions, ``F`` features.
