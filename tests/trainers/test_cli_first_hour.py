@@ -81,3 +81,25 @@ def test_train_help_groups_its_flags_and_gives_every_default():
     missing = [a.dest for a in train._actions if a.dest != "help" and "default" not in a.help]
     assert missing == [], missing
     assert all("reading:" not in a.help for a in train._actions if a.help)
+
+
+def test_resume_with_more_episodes_extends_a_finished_run_bit_for_bit(tmp_path, capsys):
+    import numpy as np
+
+    base = ["train", "--agent", "skill-chaining", "--map", "pinball_box", "--seed", "4",
+            "--max-episode-steps", "400", "--runs", "3", "--checkpoint-every", "2", "--quiet"]
+    straight, extended = tmp_path / "six", tmp_path / "four"
+    assert main([*base, "--episodes", "6", "--out", str(straight)]) == 0
+    assert main([*base, "--episodes", "4", "--out", str(extended)]) == 0
+    assert main(["train", "--resume", str(extended), "--episodes", "6", "--quiet"]) == 0
+    for name in ("returns.npy", "lengths.npy", "n_options.npy", "option_outcomes.npy"):
+        assert np.array_equal(np.load(straight / name), np.load(extended / name)), name
+    assert json.loads((extended / "config.json").read_text())["episodes"] == 6
+    for argv, message in ((["--episodes", "3"], "fewer than the 6"),
+                          (["--runs", "5"], "only --episodes, to extend it")):
+        try:
+            main(["train", "--resume", str(extended), *argv])
+        except SystemExit:
+            pass
+        err = capsys.readouterr().err.strip()
+        assert message in err and err.count("\n") == 0

@@ -157,7 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         metavar="DIR",
         default=None,
-        help="continue the run in DIR from its last checkpoint",
+        help="continue the run in DIR from its last checkpoint; with --episodes N (more than "
+        "it had), extend it: from its last checkpoint before an agent finished, the same run as "
+        "one trained for N episodes from the start",
     )
     train.add_argument(
         "--overwrite", action="store_true", help="replace the outputs of a previous run in --out"

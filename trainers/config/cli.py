@@ -284,7 +284,11 @@ def _train(parser, args) -> int:
     """Everything is checked (arguments, the saved config, --out, building the agents) before
     anything is written, so a refused command leaves nothing that blocks the corrected one."""
     from skillchain_torch.trainers.loop.population import PopulationTrainer
-    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint, resume_checkpoint
+    from skillchain_torch.trainers.outputs.checkpoint import (
+        extend_run,
+        latest_checkpoint,
+        resume_checkpoint,
+    )
 
     max_threads = MAX_THREADS_PER_CPU * (os.cpu_count() or 1)
     if args.threads < 1:
@@ -298,11 +302,13 @@ def _train(parser, args) -> int:
     sharded = _check_sharding(parser, args)
     if args.resume is not None:
         out = args.resume
-        given = [_flag(n) for n in CONFIG_OPTIONS if getattr(args, n) is not None]
+        given = [_flag(n) for n in CONFIG_OPTIONS if getattr(args, n) is not None
+                 and n != "episodes"]  # (--episodes N extends the run)
         given += ["--out"] * (args.out is not None) + ["--overwrite"] * args.overwrite
+        given += ["--config"] * (args.config is not None)
         if given:
             parser.error(f"--resume continues with the saved config, writing into {out}; do "
-                         f"not pass " + ", ".join(given))  # fmt: skip
+                         f"not pass " + ", ".join(given) + " (only --episodes, to extend it)")
         path = out / "config.json"
         if not path.is_file():
             parser.error(f"--resume {out}: no config.json there (not a run directory)")
@@ -319,15 +325,28 @@ def _train(parser, args) -> int:
                 parser.error(_flag_message(err, ["device"]))
             hint = " (resume with --device cpu)" if "device" in getattr(err, "fields", ()) else ""
             parser.error(f"{path}: {err}{hint}")
+        extend = args.episodes is not None and args.episodes != config.episodes
+        if extend and args.episodes < config.episodes:
+            parser.error(f"--episodes {args.episodes} is fewer than the {config.episodes} of "
+                         f"{out}: a run can be extended, not shortened")  # fmt: skip
+        if extend and (sharded or (out / "sharding.json").is_file()):
+            parser.error(f"--resume {out} --episodes: a sharded run cannot be extended yet")
         if sharded or (out / "sharding.json").is_file():
             return _train_sharded(parser, args, config, out, native, resume=True)
         checkpoint = latest_checkpoint(out)
         if checkpoint is None:
             parser.error(f"--resume {out}: no checkpoint under {out / 'checkpoints'}")
         try:
-            trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads,
-                                        native=native)
-            checkpoint = resume_checkpoint(out, trainer)  # damaged newer ones: the one before
+            if extend:  # from the newest checkpoint before any agent finished
+                config = dataclasses.replace(config, episodes=args.episodes)
+                trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads,
+                                            native=native)  # fmt: skip
+                checkpoint = extend_run(out, trainer)
+                config.save_json(out / "config.json")
+            else:
+                trainer = PopulationTrainer(config, out_dir=out, num_threads=args.threads,
+                                            native=native)  # fmt: skip
+                checkpoint = resume_checkpoint(out, trainer)  # damaged newer: the one before
         except ValueError as err:
             parser.error(_one_line(err))
         if not args.quiet:

@@ -123,6 +123,16 @@ def _per_agent(module, population: int, names: tuple[str, ...] = ("weight",)) ->
     return [t.detach() for t in tensors]
 
 
+def _widened(saved: np.ndarray, episodes: int, fill) -> np.ndarray:
+    """``saved [P, E, ...]`` with room for ``episodes >= E`` (``fill`` after E): a run
+    extended by ``--resume --episodes`` continues into the new columns."""
+    if saved.shape[1] >= episodes:
+        return saved.copy()
+    out = np.full((saved.shape[0], episodes, *saved.shape[2:]), fill, dtype=saved.dtype)
+    out[:, :saved.shape[1]] = saved
+    return out
+
+
 def _short(values: list[int], most: int = 10) -> str:
     """``[0, 1, 2]``, or the first ``most`` and how many in all."""
     if len(values) <= most:
@@ -423,8 +433,8 @@ class PopulationTrainer:
         t = state["trainer"]
         self.agent.load_state_dict(state["agent"])
         self.stepper.load_state_dict(state["env"])
-        self.returns = t["returns"].numpy().copy()
-        self.lengths = t["lengths"].numpy().copy()
+        self.returns = _widened(t["returns"].numpy(), self.config.episodes, np.nan)
+        self.lengths = _widened(t["lengths"].numpy(), self.config.episodes, 0)
         self.collector.load_state_dict(t)
         self._anneal()
         self.elapsed = float(t["elapsed"])

@@ -42,7 +42,8 @@ from skillchain_torch.options.io import content_digest, read_torch_file
 from skillchain_torch.trainers.config.config import TrainConfig
 
 __all__ = ["FORMAT_VERSION", "save_checkpoint", "read_checkpoint", "load_checkpoint",
-           "latest_checkpoint", "resume_checkpoint", "payload_digest", "DamagedCheckpoint"]
+           "latest_checkpoint", "resume_checkpoint", "extend_run", "payload_digest",
+           "DamagedCheckpoint"]
 
 logger = logging.getLogger(__name__)
 
@@ -174,9 +175,11 @@ def load_checkpoint(path: str | Path, trainer) -> None:
     _restore(read_checkpoint(path), path, trainer)
 
 
-def _restore(state: dict, path: Path, trainer) -> None:
+def _restore(state: dict, path: Path, trainer, extend: bool = False) -> None:
     saved: TrainConfig = state["config"]
     for field in saved.mismatches(trainer.config):
+        if extend and field == "episodes" and trainer.config.episodes >= saved.episodes:
+            continue  # (extend_run: more episodes from a checkpoint before any agent finished)
         raise ValueError(
             f"{path}: config field {field!r} is {getattr(saved.resolved(), field)!r} in the "
             f"checkpoint but {getattr(trainer.config, field)!r} in this trainer"
@@ -220,6 +223,24 @@ def resume_checkpoint(directory: str | Path, trainer) -> Path:
         return path
     more = "; no earlier checkpoint verifies either" if len(damaged) > 1 else ""
     raise ValueError(f"{damaged[0][1]}{more}")
+
+
+def extend_run(directory: str | Path, trainer) -> Path:
+    """Restore ``trainer``, whose config asks for more episodes than the run in ``directory``
+    had, from the newest checkpoint at which no agent had yet finished its episodes (an agent
+    that finished stopped for good), so the run continues exactly as a run of the new length
+    would have; returns its path. ``ValueError`` in one line when there is none."""
+    for path in reversed(_checkpoints(directory)):
+        try:
+            state = read_checkpoint(path)
+        except DamagedCheckpoint:
+            continue
+        saved = state["config"]
+        if int(state["trainer"]["episodes_done"].max()) < saved.episodes:
+            _restore(state, path, trainer, extend=True)
+            return path
+    raise ValueError(f"{directory}: no checkpoint from before an agent finished its episodes, "
+                     "so the run cannot be extended; train it again with more --episodes")
 
 
 def _checkpoints(directory: str | Path) -> list[Path]:

@@ -169,9 +169,14 @@ class DiscoveryLog(TimedHook):
                 "totals": dict(self.totals)}  # fmt: skip
 
     def load_state_dict(self, state: dict) -> None:
-        self.n_options = state["n_options"].numpy().copy()
+        from skillchain_torch.trainers.loop.population import _widened
+
+        # A run extended by --resume --episodes keeps the room registered for its new length.
+        episodes = max(state["n_options"].shape[1],
+                       0 if self.n_options is None else self.n_options.shape[1])
+        self.n_options = _widened(state["n_options"].numpy(), episodes, -1)
         if "outcomes" in state:  # (not in checkpoints saved before the counts were kept)
-            self.outcomes = state["outcomes"].numpy().copy()
+            self.outcomes = _widened(state["outcomes"].numpy(), episodes, 0)
         if "slot_outcomes" in state:  # (nor before each option's were)
             self.slot_outcomes = state["slot_outcomes"].numpy().copy()
         self.totals = Counter(state["totals"])
