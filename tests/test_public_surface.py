@@ -85,7 +85,7 @@ def test_all_names_the_subpackages_and_each_loads():
 def test_license_and_py_typed_ship():
     tomllib = pytest.importorskip("tomllib")  # Python 3.11+
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
-    assert pyproject["project"]["license"] == {"text": "MIT"}
+    assert pyproject["project"]["license"] == "MIT"  # an SPDX expression (PEP 639)
     text = (ROOT / "LICENSE").read_text()
     assert text.startswith("MIT License") and "skillchain_torch developers" in text
     assert (ROOT / "skillchain_torch" / "py.typed").is_file()

@@ -69,15 +69,15 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 from operator import attrgetter
 
 import torch
 from tensordict import TensorDict
 from torch import Tensor, nn
 
-from skillchain_torch.backends import hierarchical as backend
 from skillchain_torch.backends.native import check_same_kernels
-from skillchain_torch.backends.select import discovery_rules
+from skillchain_torch.backends.select import discovery_rules, hierarchical_step
 from skillchain_torch.discovery import (
     CONVERGENCE_EPISODES,
     CONVERGENCE_THRESHOLD,
@@ -284,10 +284,12 @@ class HierarchicalAgent(nn.Module):
                                                  dtype=torch.float64, device=device)).shape[-1]
         self.q_head = (LinearQHead(num_features, self.num_decisions, self.population,
                                    device=device) if q_head is None else q_head.to(device))
-        self.native = backend.resolve(
+        # The step's three calls, bound once: the torch path of this file, or a compiled step
+        # where every piece is the built-in one (backends.select.hierarchical_step).
+        self._bind_step(hierarchical_step(
             native, option_head=self.bank.q_head, top_head=self.q_head,
             top_features=self.features, device=self.bank.status.device, obs_dim=self.obs_dim,
-            num_primitives=NUM_PRIMITIVES, completion_reward=completion_reward)
+            num_primitives=NUM_PRIMITIVES, completion_reward=completion_reward))
         # Memberships and refits go with the step where the classifier is the built-in one;
         # a classifier of the user's own keeps its torch path under a compiled step (and
         # native=True asks it for C, which it refuses, naming itself).
@@ -339,8 +341,20 @@ class HierarchicalAgent(nn.Module):
         out = super()._apply(fn, *args, **kwargs)
         weights = (self.q_head.weight, self.bank.q_head.weight) if self.native else ()
         if any(w.device.type != "cpu" or w.dtype != torch.float64 for w in weights):
-            self.native = False
+            self._bind_step(None)
         return out
+
+    def _bind_step(self, kernel) -> None:
+        """Bind the step's three calls to ``kernel`` (a compiled step), or with ``None`` to
+        this file's torch path: the choice is made here, once, never inside the step."""
+        self.kernel, self.native = kernel, kernel is not None
+        if kernel is None:
+            self._decide, self._actions = self._torch_decide, self._torch_actions
+            self._transition_rest = self._torch_transition_rest
+        else:
+            self._decide = partial(kernel.decide, self)
+            self._actions = partial(kernel.actions, self)
+            self._transition_rest = partial(kernel.transition, self)
 
     # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
     # parameters, buffers and submodules) costs more than the tensor maths for these.
@@ -426,12 +440,14 @@ class HierarchicalAgent(nn.Module):
         reached = self.targets(next_obs, terminated, contains_next, reward)
         u = self.rng.uniform(UNIFORMS_PER_STEP, mask=stepped)
         own_next = torch.where(stepped[:, None], self._raw_contains, self.own_contains)
-        if self.native:  # the rest in one compiled pass, on the declared StepState
-            info = self._compiled_transition(backend.AtNext(
-                next_obs, reward, terminated, truncated, stepped, contains_next, reached, u,
-                *self._encode_next(next_obs), own=own_next))
-            self.own_contains = own_next
-            return info
+        return self._transition_rest(next_obs, reward, terminated, truncated, stepped,
+                                     contains_next, reached, u, own_next)  # fmt: skip
+
+    def _torch_transition_rest(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
+                               truncated: Tensor, stepped: Tensor, contains_next: Tensor,
+                               reached: Tensor, u: Tensor, own_next: Tensor) -> dict:  # fmt: skip
+        """The rest of :meth:`transition` after the memberships, targets and uniforms of
+        ``s'``: the paper's updates and the next decision and action, in this order."""
         bank = self.bank
         ended = terminated | truncated
         reward = torch.where(stepped, reward, torch.zeros_like(reward))
@@ -485,7 +501,19 @@ class HierarchicalAgent(nn.Module):
         self._new_decisions(decision_ended & ~ended, phi_next, d_next)
         self.option = torch.where(ended, torch.full_like(self.option, -1), self.option)
         self._act(continuing, u[:, 2:])
+        if self.WANTS_VALUE:  # Q(s', d) of the decision in force, for discovery's samples
+            self.last_value = self._value_in_force(stepped, decision_ended)
         return info
+
+    def _value_in_force(self, stepped: Tensor, decision_ended: Tensor) -> Tensor:
+        """``[P]``: ``Q(s', d)`` of the decision in force after the step. New decisions were
+        valued before this step's update; an agent going on with its option had no update this
+        step, so its value now is the value then."""
+        value = self.last_q.gather(1, self.decision[:, None])[:, 0]
+        going_on = (stepped & ~decision_ended).nonzero()[:, 0]
+        if going_on.numel() > 0:
+            value[going_on] = self.q_head.q_value(self.last_phi, self.decision, going_on)
+        return value
 
     def extra_repr(self) -> str:
         return (f"population={self.population}, slots={self.slots}, epsilon={self.epsilon}, "
@@ -531,11 +559,14 @@ class HierarchicalAgent(nn.Module):
         0 for the others). ``phi``: ``features(obs)``, from :meth:`_encode`."""
         available = self.top_level_available(obs, contains)
         rows = torch.ones_like(self.active) if rows is None else rows
-        if self.native:
-            q, decision = backend.choose(self.q_head.weight, phi, available, rows,
-                                         self.num_primitives, uniforms, self.epsilon)  # fmt: skip
-            self.last_phi, self.last_q, self.last_available = phi, q, available
-            return phi, decision
+        q, decision = self._decide(phi, available, rows, uniforms)
+        self.last_phi, self.last_q, self.last_available = phi, q, available
+        return phi, decision
+
+    def _torch_decide(self, phi: Tensor, available: Tensor, rows: Tensor,
+                      uniforms: Tensor) -> tuple[Tensor, Tensor]:  # fmt: skip
+        """``(Q [P, D], decision [P])``: the top level's values on ``rows`` and its
+        epsilon-greedy choice among the ``available`` decisions."""
         # Value only what can be chosen: the primitives, and the few options whose initiation
         # set holds the state (each value is the same row sum as a full forward).
         if self.closed_form:  # (a buffer: no graph; the hot path skips the context)
@@ -544,9 +575,8 @@ class HierarchicalAgent(nn.Module):
             with torch.no_grad():
                 q = self.q_head.forward_mask(phi, available & rows[:, None],
                                              dense=self.num_primitives)  # fmt: skip
-        self.last_phi, self.last_q, self.last_available = phi, q, available
-        return phi, epsilon_greedy(q, available, self.epsilon, uniforms,
-                                   check=False)  # primitives are always available
+        return q, epsilon_greedy(q, available, self.epsilon, uniforms,
+                                 check=False)  # primitives are always available
 
     def learn(self, phi: Tensor, decision: Tensor, ret: Tensor, duration: Tensor,
               next_value: Tensor, terminated: Tensor, active: Tensor,
@@ -676,11 +706,10 @@ class HierarchicalAgent(nn.Module):
     def _act(self, rows: Tensor, uniforms: Tensor) -> None:
         """Set ``action`` of ``rows [P]``: the primitive decision, or the executing option's
         epsilon-greedy action by its Q-head at the current state."""
-        if self.native:
-            self.action = backend.act(self.bank.q_head.weight, self.option_code, rows,
-                                      self.decision, self.option, uniforms, self.option_epsilon,
-                                      self.action.clone())  # fmt: skip
-            return
+        self.action = self._actions(rows, uniforms)
+
+    def _torch_actions(self, rows: Tensor, uniforms: Tensor) -> Tensor:
+        """``[P]``: the new ``action`` (rows outside ``rows`` keep theirs)."""
         action = self.decision.clamp(max=self.num_primitives - 1)
         executing = rows & (self.option >= 0)
         index = executing.nonzero()[:, 0]
@@ -690,45 +719,7 @@ class HierarchicalAgent(nn.Module):
             by_option = epsilon_greedy(q_opt, all_actions, self.option_epsilon, uniforms[index],
                                        check=False)  # fmt: skip
             action = action.index_put((index,), by_option)
-        self.action = torch.where(rows, action, self.action)
-
-    # ==========================================================================================
-    # The compiled step (native): what it hands the backend, and what it keeps
-    # ==========================================================================================
-    def step_rules(self) -> backend.StepRules:
-        """The settings the compiled step follows, as the agent holds them now."""
-        return backend.StepRules(
-            epsilon=self.epsilon, option_epsilon=self.option_epsilon, gamma=self.gamma,
-            max_option_steps=self.max_option_steps, option_alpha=self.bank.q_head.alpha,
-            completion_reward=float(self.option_update.completion_reward),
-            failure_bootstrap_primitives=self.failure_bootstrap == "primitives",
-            intra_option_primitives=self.intra_option_primitives,
-            intra_option_primitive_target=self.intra_option_target == "primitives",
-            interruption=self.interruption, leave_from=self.leave_from)  # fmt: skip
-
-    def _encode_next(self, next_obs: Tensor) -> tuple[Tensor, Tensor | None, Tensor | None]:
-        """``(phi(s'), the option heads' code of s' or None, the columns of phi it is picked
-        from or None)``: where the code's features are among the top level's
-        (:func:`~skillchain_torch.agents.top_level.shared_fourier_columns`), the step picks
-        them itself instead of a second basis."""
-        phi = self.features(next_obs)
-        columns = self._code_columns
-        return phi, self.bank.q_head.encode(next_obs) if columns is None else None, columns
-
-    def _compiled_transition(self, at_next: backend.AtNext) -> dict[str, Tensor]:
-        """The rest of :meth:`transition` after the memberships, targets and uniforms of
-        ``s'``, in one compiled pass; the same monitoring dict."""
-        learned = backend.Learned(self.q_head.weight, self.bank.q_head.weight,
-                                  self.update.step_size, self.bank.status)  # fmt: skip
-        before = self.step_state
-        self.step_state, out = backend.transition(before, learned, at_next, self.step_rules(),
-                                                  want_value=self.WANTS_VALUE)  # fmt: skip
-        self.last_phi, self.last_q, self.last_value = at_next.phi, out.q, out.value
-        self._options_starting(out.started)
-        return {"decision_ended": out.decision_ended, "duration": out.duration,
-                "decision_return": out.decision_return, "option_delta": out.option_delta,
-                "smdp_delta": out.smdp_delta, "decision": before.decision,
-                "option": before.option, "reached": at_next.reached}  # fmt: skip
+        return torch.where(rows, action, self.action)
 
     # ==========================================================================================
     # The episode protocol every agent of a trainer follows (rows = active agents, ascending id)
@@ -1088,16 +1079,7 @@ class SkillChainingAgent(HierarchicalAgent):
             self.own_contains = torch.where(created[:, None], self._raw_contains,
                                             self.own_contains)  # fmt: skip
             self.discovery.created_rows_evaluated(created)
-        # New decisions were valued before this step's update; an agent going on with its
-        # option had no update this step, so its value now is the value then.
-        if self.native:  # the compiled transition valued them (the same rule)
-            value_next = self.last_value
-        else:
-            value_next = self.last_q.gather(1, self.decision[:, None])[:, 0]
-            going_on = (stepped & ~info["decision_ended"]).nonzero()[:, 0]
-            if going_on.numel() > 0:
-                value_next[going_on] = self.q_head.q_value(self.last_phi, self.decision,
-                                                           going_on)  # fmt: skip
+        value_next = self.last_value  # Q(s', d) of the decision in force (_value_in_force)
         self.q_decision = value_next if every else torch.where(stepped, value_next,
                                                                  self.q_decision)  # fmt: skip
         self._begin_executions()

@@ -32,7 +32,8 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator, Mapping, Sequence
 
-__all__ = ["builtin_type_problems", "compiled", "discovery_rules", "same_bits_kernels"]
+__all__ = ["builtin_type_problems", "compiled", "discovery_rules", "hierarchical_step",
+           "same_bits_kernels"]
 
 
 def builtin_type_problems(pieces: Mapping[str, tuple[object, type]]) -> list[str]:
@@ -62,6 +63,22 @@ def compiled(native: bool | None, needs: Mapping[str, bool],
         raise ValueError(f"the compiled path cannot run: {'; '.join(missing)}; use "
                          "native=False (or leave it None) to take the torch path")
     return not missing if native is None else bool(native)
+
+
+def hierarchical_step(native: bool | None, **pieces):
+    """The hierarchical agent's compiled step (:class:`~.compiled_step.CompiledStep`) or
+    ``None`` (the torch path), chosen once when the agent is built: ``native`` as
+    :func:`compiled` reads it, for the pieces :func:`~.hierarchical.resolve` checks
+    (``option_head``, ``top_head``, ``top_features``, ``device``, ``obs_dim``,
+    ``num_primitives``, ``completion_reward``); ``native=True`` with a piece of the user's own
+    is a ``ValueError`` naming it."""
+    from skillchain_torch.backends import hierarchical
+
+    if not hierarchical.resolve(native, **pieces):
+        return None
+    from skillchain_torch.backends.compiled_step import CompiledStep
+
+    return CompiledStep()
 
 
 def discovery_rules(native: bool) -> type:

@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def readme_snippet() -> str:
     text = (ROOT / "README.md").read_text()
-    start = text.index("```python\n", text.index("### Your own pieces")) + len("```python\n")
+    start = text.index("```python\n", text.index("Your own pieces\n")) + len("```python\n")
     return text[start:text.index("```\n", start)]
 
 
@@ -51,7 +51,7 @@ def test_config_json_describes_the_users_agent_not_the_configs(tmp_path):
 
 
 def test_readme_snippet_runs_and_writes_what_the_cli_writes(tmp_path):
-    code = readme_snippet().replace("episodes=20", "episodes=2")
+    code = readme_snippet().replace("episodes=30", "episodes=2")
     code = code.replace('"runs/mine"', repr(str(tmp_path / "mine")))
     assert code != readme_snippet()
     exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
@@ -61,7 +61,7 @@ def test_readme_snippet_runs_and_writes_what_the_cli_writes(tmp_path):
         assert (out / name).exists(), name
     assert json.loads((out / "config.json").read_text())["agent"] == "user:SkillChainingAgent"
     runs = [p.name for p in (out / "tb").iterdir()]
-    assert runs == ["SkillChainingAgent_gymnasium-MountainCar-v0_P4_seed0"], runs
+    assert runs == ["SkillChainingAgent_pinball_simple_single_P4_seed0"], runs
     assert not [p for p in (out / "tb" / runs[0]).iterdir() if p.is_dir()]  # no hparams run
     events = b"".join(p.read_bytes() for p in (out / "tb" / runs[0]).iterdir())
     assert b"_hparams_/session_start_info" in events and b"gestation" in events  # hparams here
