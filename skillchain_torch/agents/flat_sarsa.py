@@ -48,14 +48,14 @@ Example:
 from __future__ import annotations
 
 import math
+from functools import partial
 from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 
-from skillchain_torch.backends import sarsa as native_sarsa
-from skillchain_torch.backends.native import check_same_kernels, for_c
-from skillchain_torch.backends.select import compiled
+from skillchain_torch.backends.native import check_same_kernels
+from skillchain_torch.backends.select import flat_step
 from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
@@ -109,12 +109,9 @@ class FlatSarsaAgent(nn.Module):
         super().__init__()
         cfg = config.resolved()
         device = torch.device(cfg.device if device is None else device)
-        self.native = compiled(native, {
-            "the compiled kernels (built)": native_sarsa.AVAILABLE,
-            f"the CPU (got {device})": device.type == "cpu",
-            "Pinball's 4-d observation and 5 actions":
-                cfg.obs_dim in (None, OBS_DIM) and cfg.num_actions in (None, NUM_ACTIONS),
-        })
+        # The step's four calls, bound once: this file's torch path, or the compiled step
+        # where it applies (backends.select.flat_step).
+        self._bind_step(flat_step(native, device, cfg.obs_dim, cfg.num_actions))
         self.config = cfg
         self.population = cfg.runs
         # The environment's sizes (its specs; Pinball's 4 and 5 when not given).
@@ -135,22 +132,32 @@ class FlatSarsaAgent(nn.Module):
                             device=device)
         w.action = torch.zeros(cfg.runs, dtype=torch.int64, device=device)
 
+    def _bind_step(self, kernel) -> None:
+        """Bind the step's calls to ``kernel`` (a compiled step) or, with ``None``, to this
+        file's torch path: the choice is made here, once, never inside the step."""
+        self.kernel, self.native = kernel, kernel is not None
+        if kernel is None:
+            self.q_values, self._row_values = self._torch_values, self._torch_row_values
+            self._sarsa_step, self._observe_step = self._torch_sarsa_step, self._torch_observe
+        else:
+            self.q_values, self._row_values = (partial(kernel.values, self),
+                                               partial(kernel.row_values, self))
+            self._sarsa_step = partial(kernel.learn, self)
+            self._observe_step = partial(kernel.observe, self)
+
     # ------------------------------------------------------------------ pieces
     def featurize(self, obs: Tensor) -> Tensor:
         """``FourierBasis(obs)``: ``[n, 4] -> [n, F]``."""
         return self.features(obs)
 
-    def q_values(self, phi: Tensor) -> Tensor:
-        """``Q(s, .)`` of every working row: ``phi [n, F] -> [n, D]``."""
-        head = self._work.head
-        return native_sarsa.linear_q(head.weight, phi) if self.native else head(phi)
+    def _torch_values(self, phi: Tensor) -> Tensor:
+        """``Q(s, .)`` of every working row: ``phi [n, F] -> [n, D]`` (``q_values``)."""
+        return self._work.head(phi)
 
-    def _row_values(self, phi: Tensor, rows: Tensor) -> Tensor:
+    def _torch_row_values(self, phi: Tensor, rows: Tensor) -> Tensor:
         """``Q(s, .)`` of the working ``rows`` only, from their features ``phi [n, F]``
         (the other rows' are not read): ``[len(rows), D]``."""
         head = self._work.head
-        if self.native:
-            return native_sarsa.linear_q(head.weight, phi[rows], rows)
         wanted = torch.zeros(head.population, dtype=torch.bool, device=phi.device)
         wanted[rows] = True
         return head.forward_rows(phi, wanted)[rows]
@@ -168,14 +175,12 @@ class FlatSarsaAgent(nn.Module):
                terminated: Tensor | None) -> None:  # fmt: skip
         """One Sarsa step of every working row toward ``r + gamma Q(s', a')`` (no bootstrap
         where ``terminated``); ``q1 = Q(s', .)`` from the weights before the step."""
-        w = self._work
         q_next = q1.gather(1, a1[:, None])[:, 0]
-        if self.native:
-            native_sarsa.sarsa_learn(w.head.weight, w.phi, w.action, for_c(reward, torch.float64),
-                                     q_next, None if terminated is None else for_c(
-                                         terminated, torch.bool),
-                                     self.update.step_size, w.gamma)  # fmt: skip
-            return
+        self._sarsa_step(reward, phi1, a1, q_next, terminated)
+
+    def _torch_sarsa_step(self, reward: Tensor, phi1: Tensor, a1: Tensor, q_next: Tensor,
+                          terminated: Tensor | None) -> None:  # fmt: skip
+        w = self._work
         self.update(w.head, w.phi, w.action, reward, w.one, phi1, a1,
                     w.never if terminated is None else terminated, next_value=q_next)
 
@@ -222,15 +227,15 @@ class FlatSarsaAgent(nn.Module):
         w = self._work
         phi1 = self.features(obs)
         slot = self._next_slot()
-        if self.native:  # the whole step per agent row in C
-            a1 = native_sarsa.sarsa_observe(
-                w.head.weight, w.phi, phi1, w.action, for_c(reward, torch.float64), w.uniforms,
-                slot, self.policy.epsilon, self.update.step_size, w.gamma)  # fmt: skip
-        else:
-            q1 = self.q_values(phi1)
-            a1 = self._decide(q1, w.uniforms[:, slot])
-            self._learn(reward, phi1, a1, q1, None)
+        a1 = self._observe_step(phi1, reward, slot)
         w.phi, w.action = phi1, a1
+        return a1
+
+    def _torch_observe(self, phi1: Tensor, reward: Tensor, slot: int) -> Tensor:
+        """The step of every working row without an episode end: its next actions."""
+        q1 = self.q_values(phi1)
+        a1 = self._decide(q1, self._work.uniforms[:, slot])
+        self._learn(reward, phi1, a1, q1, None)
         return a1
 
     def observe_ends(

@@ -32,8 +32,8 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator, Mapping, Sequence
 
-__all__ = ["builtin_type_problems", "compiled", "discovery_rules", "hierarchical_step",
-           "same_bits_kernels"]
+__all__ = ["builtin_type_problems", "compiled", "discovery_rules", "flat_step",
+           "hierarchical_step", "same_bits_kernels"]
 
 
 def builtin_type_problems(pieces: Mapping[str, tuple[object, type]]) -> list[str]:
@@ -79,6 +79,24 @@ def hierarchical_step(native: bool | None, **pieces):
     from skillchain_torch.backends.compiled_step import CompiledStep
 
     return CompiledStep()
+
+
+def flat_step(native: bool | None, device, obs_dim: int | None, num_actions: int | None):
+    """The flat Sarsa agent's compiled step (:class:`~.compiled_sarsa.CompiledSarsaStep`) or
+    ``None`` (the torch path), chosen once when the agent is built: ``native`` as
+    :func:`compiled` reads it, for the CPU and Pinball's 4-d observation and 5 actions."""
+    from skillchain_torch.backends import sarsa
+
+    if not compiled(native, {
+        "the compiled kernels (built)": sarsa.AVAILABLE,
+        f"the CPU (got {device})": device.type == "cpu",
+        "Pinball's 4-d observation and 5 actions":
+            obs_dim in (None, 4) and num_actions in (None, 5),
+    }):
+        return None
+    from skillchain_torch.backends.compiled_sarsa import CompiledSarsaStep
+
+    return CompiledSarsaStep()
 
 
 def discovery_rules(native: bool) -> type:
