@@ -49,10 +49,39 @@ def table(folder: Path) -> str:
     return f"seed block from {seeds}, {episodes} episodes\n\n" + "\n".join(lines)
 
 
+def runaway(folder: Path, after: int = 50, long: int = 20_000) -> str:
+    """Cost and runaway per arm: the whole command's wall time, agent steps, agents with an
+    episode over ``long`` steps after episode ``after``, the longest episode, and executions
+    per agent-episode after ``after`` that succeeded or timed out (``option_outcomes.npy``)."""
+    lines = ["| arm | whole command (s) | agent steps | agents with an episode over "
+             f"{long:,} steps after episode {after} | longest episode | executions per "
+             f"agent-episode after {after}: success, timeout |", "|---|---:|---:|---:|---:|---|"]
+    for arm in sorted(p.parent.name for p in folder.glob("*/lengths.npy")):
+        lengths = np.load(folder / arm / "lengths.npy")
+        info = json.loads((folder / arm / "run_info.json").read_text())
+        runaway_agents = int((lengths[:, after:] > long).any(axis=1).sum())
+        outcomes = folder / arm / "option_outcomes.npy"
+        if outcomes.exists():
+            late = np.load(outcomes)[:, after:].mean(axis=(0, 1))
+            executions = f"{late[0]:.2f}, {late[1]:.2f}"
+        else:
+            executions = "-"
+        lines.append(f"| {arm} | {info.get('wall_time_s', float('nan')):,.0f} | "
+                     f"{lengths.sum() / 1e6:.1f} M | {runaway_agents} | {lengths.max():,} | "
+                     f"{executions} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder", type=Path)
-    print(table(parser.parse_args(argv).folder))
+    parser.add_argument("--runaway", action="store_true",
+                        help="also the cost and runaway table")
+    args = parser.parse_args(argv)
+    print(table(args.folder))
+    if args.runaway:
+        print()
+        print(runaway(args.folder))
 
 
 if __name__ == "__main__":
