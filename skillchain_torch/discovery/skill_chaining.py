@@ -297,7 +297,7 @@ class SkillChaining:
         self.raw_now = torch.where(stepped[:, None], raw_next, raw_now)
         self._finish_executions(option, reached, duration, decision_ended & stepped,
                                 terminated)  # fmt: skip
-        sample = value  # Q(s, d) of the decision in force
+        sample = value.detach()  # Q(s, d) of the decision in force (a value, no graph)
         return self._triggers(contains, option, sample, reached, stepped, raw_now, raw_next)
 
     def _triggers(self, contains: Tensor, option: Tensor, sample: Tensor, reached: Tensor,
