@@ -43,11 +43,20 @@ def window(returns: np.ndarray, first: int, last: int) -> np.ndarray:
 
 
 def welch_p_greater(x, y) -> tuple[float, float]:
-    """``(t, one-sided p)`` of Welch's test that mean(x) > mean(y)."""
+    """``(t, one-sided p)`` of Welch's test that mean(x) > mean(y).
+
+    Example:
+        >>> t, p = welch_p_greater([1.0, 2.0, 3.0], [2.0, 3.0, 4.0])
+        >>> round(t, 3), round(p, 3)   # behind: p well above 1/2
+        (-1.225, 0.856)
+    """
     x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
     se = math.sqrt(x.var(ddof=1) / x.size + y.var(ddof=1) / y.size)
     t = (x.mean() - y.mean()) / se
-    return float(t), float(_t_upper(t, welch_df(x, y)))
+    df = welch_df(x, y)
+    # (_t_upper is P(T > t) for t >= 0: a negative t's p is the complement of |t|'s)
+    p = _t_upper(t, df) if t >= 0 else 1.0 - _t_upper(-t, df)
+    return float(t), float(p)
 
 
 def holm(pvalues: list[float], alpha: float = 0.05) -> list[bool]:
