@@ -22,7 +22,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from skillchain_torch.backends import rng as backend
+from skillchain_torch.backends.select import same_bits_kernel
 
 _TWO64 = 1 << 64
 
@@ -94,6 +94,8 @@ class CounterRNG:
         self.seeds = seeds.clone()
         self.stream = int(stream)
         self._salt = stream_key(self.stream)
+        # The compiled draws (the same bits) where built, chosen once: None, the torch path.
+        self._kernel = same_bits_kernel("rng")
         self.counter = (
             torch.zeros_like(seeds) if counter is None else torch.as_tensor(counter).clone()
         )
@@ -119,8 +121,9 @@ class CounterRNG:
     def _draw(self, n: int, mask: Tensor | None, uniform: bool) -> Tensor | None:
         """The compiled draw (words or uniforms, the same bits), or ``None`` where it does not
         apply."""
-        drawn = (backend.draw(self.seeds, self.counter, n, mask, self._salt, uniform)
-                 if backend.NATIVE else None)  # (switched off: the torch path never enters it)
+        kernel = self._kernel
+        drawn = None if kernel is None else kernel(self.seeds, self.counter, n, mask,
+                                                   self._salt, uniform)  # fmt: skip
         if drawn is None:
             return None
         out, self.counter = drawn

@@ -33,8 +33,9 @@ __all__ = ["AVAILABLE", "NATIVE", "applies", "target_indicator", "event_list", "
            "record", "record_ring", "copy_slots", "outcomes", "triggers"]
 
 AVAILABLE = _c is not None
-# On wherever built (the same bits: no choice to make); tests and benchmarks switch it off
-# (skillchain_torch.backends.select.same_bits_kernels).
+# On wherever built (the same bits: no choice to make). Read once, when an agent is built
+# (skillchain_torch.backends.select.discovery_rules); tests and benchmarks build theirs with it
+# off (same_bits_kernels) to compare.
 NATIVE = AVAILABLE
 
 
@@ -42,9 +43,8 @@ OBS_DIM = 4  # the ring and trace kernels copy Pinball's 4 numbers a state
 
 
 def applies(*tensors: Tensor) -> bool:
-    """The compiled path is on and every tensor is on the CPU."""
-    if not NATIVE:
-        return False
+    """Every tensor is on the CPU (the kernels' one condition; whether they run at all was
+    chosen when the agent was built: select.discovery_rules reads NATIVE)."""
     for t in tensors:  # (a loop, not all() over a generator: this runs several times a step)
         if not t.is_cpu:
             return False

@@ -29,8 +29,9 @@ except ImportError:  # built without a C compiler: FourierBasis's torch form ser
 __all__ = ["AVAILABLE", "NATIVE", "features"]
 
 AVAILABLE = _c is not None
-# On wherever built (the same bits: no choice to make); tests and benchmarks switch it off
-# (skillchain_torch.backends.select.same_bits_kernels).
+# On wherever built (the same bits: no choice to make). Read once, when a FourierBasis is built
+# (skillchain_torch.backends.select.same_bits_kernel); tests and benchmarks build theirs with it
+# off (same_bits_kernels) to compare.
 NATIVE = AVAILABLE
 MAX_DIM, MAX_ORDER = 16, 63  # the C side's fixed-size tables
 
@@ -39,7 +40,7 @@ def features(x: Tensor, dim: int, order: int, num_features: int) -> Tensor | Non
     """``cos(pi c . x)`` of the rows ``x [n, dim]`` for FourierBasis's coefficient vectors
     (``[n, num_features]``), or ``None`` where the kernel does not apply (switched off, not
     CPU float64, or beyond its tables). ``x`` may be strided."""
-    if not (NATIVE and x.device.type == "cpu" and x.dtype == torch.float64 and dim <= MAX_DIM
+    if not (x.device.type == "cpu" and x.dtype == torch.float64 and dim <= MAX_DIM
             and order <= MAX_ORDER):  # fmt: skip
         return None
     n = x.shape[0]

@@ -28,8 +28,9 @@ except ImportError:  # built without a C compiler: CounterRNG's tensor path
 __all__ = ["AVAILABLE", "NATIVE", "draw"]
 
 AVAILABLE = _c is not None
-# On wherever built (the same bits: no choice to make); tests and benchmarks switch it off
-# (skillchain_torch.backends.select.same_bits_kernels).
+# On wherever built (the same bits: no choice to make). Read once, when a CounterRNG is built
+# (skillchain_torch.backends.select.same_bits_kernel); tests and benchmarks build theirs with it
+# off (same_bits_kernels) to compare.
 NATIVE = AVAILABLE
 
 
@@ -40,7 +41,7 @@ def draw(seeds: Tensor, counter: Tensor, n: int, mask: Tensor | None, salt: int,
     their 53 high bits; the counter advances by ``n`` where ``mask [P]`` (default every agent).
     ``None`` where the kernel does not apply (switched off, not on the CPU, a non-contiguous
     stream, or a mask of another shape, which the tensor path broadcasts or refuses)."""
-    if not (NATIVE and seeds.device.type == "cpu" and seeds.is_contiguous()
+    if not (seeds.device.type == "cpu" and seeds.is_contiguous()
             and counter.is_contiguous()):  # fmt: skip
         return None
     if mask is not None:

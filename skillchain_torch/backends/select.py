@@ -33,7 +33,7 @@ import contextlib
 from collections.abc import Iterator, Mapping, Sequence
 
 __all__ = ["builtin_type_problems", "compiled", "discovery_rules", "flat_step",
-           "hierarchical_step", "same_bits_kernels"]
+           "hierarchical_step", "same_bits_kernel", "same_bits_kernels"]
 
 
 def builtin_type_problems(pieces: Mapping[str, tuple[object, type]]) -> list[str]:
@@ -79,6 +79,25 @@ def hierarchical_step(native: bool | None, **pieces):
     from skillchain_torch.backends.compiled_step import CompiledStep
 
     return CompiledStep()
+
+
+def same_bits_kernel(name: str):
+    """The kernel that gives the torch path's bits for a built-in piece, chosen when the piece
+    is built: ``"fourier"`` (FourierBasis's features) or ``"rng"`` (CounterRNG's draws); ``None``
+    where it is not built or :func:`same_bits_kernels` has it off. The piece keeps the answer,
+    so a piece built with it off stays on the torch path.
+
+    Example:
+        >>> with same_bits_kernels(False):
+        ...     same_bits_kernel("fourier") is None
+        True
+    """
+    from skillchain_torch.backends import fourier, rng
+
+    module = {"fourier": fourier, "rng": rng}[name]
+    if not module.NATIVE:
+        return None
+    return module.features if name == "fourier" else module.draw
 
 
 def flat_step(native: bool | None, device, obs_dim: int | None, num_actions: int | None):

@@ -20,7 +20,7 @@ import math
 import torch
 from torch import Tensor, nn
 
-from skillchain_torch.backends import fourier as backend
+from skillchain_torch.backends.select import same_bits_kernel
 
 
 class FourierBasis(nn.Module):
@@ -45,6 +45,8 @@ class FourierBasis(nn.Module):
         self.register_buffer("coefficients", torch.tensor(coefficients, dtype=dtype))
         self.register_buffer("_k", torch.arange(order + 1, dtype=dtype), persistent=False)
         self.num_features = len(coefficients)
+        # The compiled features (the same bits) where built, chosen once: None, the torch path.
+        self._kernel = same_bits_kernel("fourier")
 
     def forward(self, x: Tensor) -> Tensor:
         """Map states ``[..., dim]`` to features ``[..., num_features]``."""
@@ -52,8 +54,8 @@ class FourierBasis(nn.Module):
         if x.dtype != self._k.dtype:
             x = x.to(self._k.dtype)
         x = x.reshape(-1, self.dim)
-        phi = (backend.features(x, self.dim, self.order, self.num_features)  # the same bits
-               if backend.NATIVE else None)
+        kernel = self._kernel
+        phi = None if kernel is None else kernel(x, self.dim, self.order, self.num_features)
         if phi is not None:
             return phi.reshape(*lead, self.num_features)
         n = x.shape[0]
