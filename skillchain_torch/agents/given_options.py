@@ -141,5 +141,5 @@ class GivenOptionsAgent(HierarchicalAgent):
                          end_outside_set=cfg.end_outside_set,
                          overlap=True,  # as the options were learned (no-op if unrelated)
                          completion_reward=cfg.completion_reward, native=native,
-                         events=(goal_event(cfg.goal or env_goal(cfg.env) or "terminated"),))
+                         events=(goal_event(cfg.goal or env_goal(cfg.env)),))  # (None: terminated)
         self.config = cfg

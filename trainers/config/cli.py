@@ -214,8 +214,8 @@ def _config_from_args(parser, args) -> TrainConfig:
         saved = {k: v for k, v in _read_config_file(parser, args.config).items()
                  if v is not None}  # (None: left to the defaults, as a flag not given)
         if "env" in given or "map" in given:  # a flag's environment replaces the file's
-            saved.pop("env", None), saved.pop("map", None), saved.pop("obs_bounds", None)
-            saved.pop("obs_dim", None), saved.pop("num_actions", None)
+            for name in ("env", "map", "obs_bounds", "obs_dim", "num_actions"):
+                saved.pop(name, None)
         given = {**saved, **given}
     if "env" in given and "map" in given:
         parser.error("--env and --map choose the environment twice: give one (--map is Pinball's)")
@@ -235,8 +235,6 @@ def _config_from_args(parser, args) -> TrainConfig:
 def _read_config_file(parser, path: Path) -> dict:
     """The fields of ``--config FILE``: a run's ``config.json`` (read as ``--resume`` reads it)
     or a TOML table of :class:`TrainConfig` fields; one line naming the file otherwise."""
-    import dataclasses as dc
-
     if path.suffix == ".json":
         try:
             return TrainConfig.load_json(path).to_dict()
@@ -250,7 +248,7 @@ def _read_config_file(parser, path: Path) -> dict:
         data = tomllib.loads(path.read_text())
     except (OSError, tomllib.TOMLDecodeError) as err:
         parser.error(f"--config {path}: cannot read it ({_one_line(err)})")
-    names = {f.name for f in dc.fields(TrainConfig)}
+    names = {f.name for f in dataclasses.fields(TrainConfig)}
     unknown = sorted(set(data) - names)
     if unknown:
         parser.error(f"--config {path}: unknown field {unknown[0]!r} (TrainConfig's fields are "

@@ -106,23 +106,25 @@ def load_run(run_dir: str | Path, device: str | None = None) -> Run:
     return Run(run_dir, trainer.config, trainer.agent, checkpoint)
 
 
-def frozen_agent(run: Run, epsilon: float, seed: int):
-    """A copy of ``run``'s agents that acts (``epsilon``-greedy, its own streams from ``seed``)
-    and never learns: a flat agent with step size 0, a hierarchical one as a plain
-    :class:`~skillchain_torch.agents.HierarchicalAgent` over its options (no discovery)."""
+def frozen_agent(run: Run, epsilon: float, seed: int, rows: list[int] | None = None):
+    """A copy of ``run``'s agents ``rows`` (default all) that acts (``epsilon``-greedy, row i
+    drawing from its own stream ``seed + i``) and never learns: a flat agent with step size 0,
+    a hierarchical one as a plain :class:`~skillchain_torch.agents.HierarchicalAgent` over its
+    options (no discovery)."""
     from skillchain_torch.agents import FlatSarsaAgent, HierarchicalAgent
     from skillchain_torch.trainers.outputs.option_trajectory import _frozen_agents
 
     agent, config = run.agent, run.config
-    P = config.runs
+    rows = list(range(config.runs)) if rows is None else [int(p) for p in rows]
     if isinstance(agent, HierarchicalAgent):
-        return _frozen_agents(agent, list(range(P)), epsilon, [seed + p for p in range(P)])
+        return _frozen_agents(agent, rows, epsilon, [seed + i for i in range(len(rows))])
     if isinstance(agent, FlatSarsaAgent):
-        frozen = FlatSarsaAgent(dataclasses.replace(config, epsilon=epsilon, seed=seed))
+        frozen = FlatSarsaAgent(dataclasses.replace(config, runs=len(rows), epsilon=epsilon,
+                                                    seed=seed))  # fmt: skip
         with torch.no_grad():
-            frozen.q_head.weight.copy_(agent.q_head.weight)
+            frozen.q_head.weight.copy_(agent.q_head.weight[rows])
             frozen.update.step_size.zero_()  # acts, never learns
-        frozen._set_active(torch.arange(P, device=frozen.q_head.weight.device))
+        frozen._set_active(torch.arange(len(rows), device=frozen.q_head.weight.device))
         return frozen
     raise TypeError(f"cannot evaluate a {type(agent).__name__}: eval knows the flat agent and "
                     "the hierarchical agents")  # fmt: skip
@@ -178,9 +180,7 @@ def _episode_frames(run: Run, p: int, epsilon: float, max_steps: int, seed: int,
                     every: int) -> list[np.ndarray]:  # fmt: skip
     """One episode of agent ``p`` alone, frozen, as RGB frames."""
     config = run.config
-    one = Run(run.dir, dataclasses.replace(config, runs=1, seed=seed), _one_agent(run, p),
-              run.checkpoint)  # fmt: skip
-    single = frozen_agent(one, epsilon, seed)
+    single = frozen_agent(run, epsilon, seed, rows=[p])
     if config.env is None:
         from skillchain_torch.envs.pinball import PinballEnv
         from skillchain_torch.envs.pinball.render import render_frame
@@ -226,19 +226,3 @@ def _episode_frames(run: Run, p: int, epsilon: float, max_steps: int, seed: int,
         action = single.observe(scale(obs), torch.tensor([float(reward)], dtype=torch.float64))
     env.close()
     return frames
-
-
-def _one_agent(run: Run, p: int):
-    """Agent ``p`` of ``run`` as a population of one (its weights; its options)."""
-    from skillchain_torch.agents import FlatSarsaAgent, HierarchicalAgent
-    from skillchain_torch.trainers.outputs.option_trajectory import _frozen_agents
-
-    agent = run.agent
-    if isinstance(agent, HierarchicalAgent):
-        return _frozen_agents(agent, [p], 0.0, [0])
-    if isinstance(agent, FlatSarsaAgent):
-        one = FlatSarsaAgent(dataclasses.replace(run.config, runs=1))
-        with torch.no_grad():
-            one.q_head.weight.copy_(agent.q_head.weight[p:p + 1])
-        return one
-    raise TypeError(f"cannot render a {type(agent).__name__}")
