@@ -1,9 +1,12 @@
 """Issue 52's confirmation block: the tables and the confirmatory tests, with Holm's correction.
 
     python results/confirm/table.py results/confirm/simple-5000x100
+    python results/confirm/table.py results/confirm/hard-5000x100 --instance hard
 
-Every arm of ``run.sh`` on seeds 5000-5099 (100 x 250, the simple instance). The confirmatory
-family was fixed here before the block ran (this file's first commit precedes its arrays):
+Every arm of ``run.sh`` (``run_hard.sh``) on seeds 5000-5099 (100 x 250; on the hard instance
+the controls (a) and (b) at 50, seeds 5000-5049). Each instance's confirmatory family was fixed
+here before its block ran (the simple family in 72c3f2c; the hard family in the commit that
+added ``HARD_CONFIRMATORY``, before any hard arm but flat's first 25 agents had finished):
 each claim is "ahead", a one-sided Welch t test of the arm's mean over the window above the
 other arm's, and Holm's step-down correction holds the family-wise error at 5% over all of
 them. "Not behind" claims are read from Welch's two-sided 95% interval (it must not lie wholly
@@ -33,6 +36,20 @@ CONFIRMATORY = (
     ("skill chaining beats a richer flat agent, order 6 (c)", "default", "flat-o6", (26, 50)),
     ("given options start ahead of flat", "given-options", "flat", (1, 10)),
 )
+# The hard instance's family (issue 52: its richer flat agent is order 6 only, order 5 being
+# the hard baseline). An arm not yet complete enters Holm's correction with p = 1: the family's
+# size is fixed, whatever has run.
+HARD_CONFIRMATORY = (
+    ("the default is ahead of flat early", "default", "flat", (26, 50)),
+    ("the faithful reading is ahead of flat early", "paper-b2", "flat", (26, 50)),
+    ("the paper preset is ahead of flat early", "paper", "flat", (26, 50)),
+    ("skill chaining beats no chaining (a)", "default", "no-chaining", (26, 50)),
+    ("skill chaining beats random subgoals (b)", "default", "random-subgoals", (26, 50)),
+    ("skill chaining beats a richer flat agent, order 6 (c)", "default", "flat-o6", (26, 50)),
+    ("given options start ahead of flat", "given-options", "flat", (1, 10)),
+)
+# The runs each arm needs before its claims are tested (the hard controls (a), (b): 50).
+RUNS = {"simple": {}, "hard": {"no-chaining": 50, "random-subgoals": 50}}
 # Descriptive "not behind" readings at the end (two-sided 95% intervals).
 NOT_BEHIND = (("default", "flat"), ("paper-b2", "flat"), ("paper", "flat"),
               ("default", "flat-o5"), ("default", "flat-o6"), ("given-options", "default"))
@@ -91,13 +108,21 @@ def windows_table(arms: dict[str, np.ndarray]) -> str:
     return "\n".join(lines)
 
 
-def confirmatory(arms: dict[str, np.ndarray]) -> str:
+def complete(arms: dict[str, np.ndarray], arm: str, instance: str) -> bool:
+    """The arm has run every agent its claims need."""
+    return arm in arms and arms[arm].shape[0] >= RUNS[instance].get(arm, 100)
+
+
+def confirmatory(arms: dict[str, np.ndarray], instance: str = "simple") -> str:
+    family = HARD_CONFIRMATORY if instance == "hard" else CONFIRMATORY
     rows, pvalues = [], []
-    for claim, arm, against, (a, b) in CONFIRMATORY:
-        if arm not in arms or against not in arms:
+    for claim, arm, against, (a, b) in family:
+        if not (complete(arms, arm, instance) and complete(arms, against, instance)):
             rows.append((claim, arm, against, (a, b), None))
+            pvalues.append(1.0)  # not yet run: counts in the family, never rejected
             continue
-        x, y = window(arms[arm], a, b), window(arms[against], a, b)
+        n = min(arms[arm].shape[0], arms[against].shape[0])  # (the controls' seeds 5000-5049)
+        x, y = window(arms[arm][:n], a, b), window(arms[against][:n], a, b)
         d, dh = diff_ci(x, y)
         t, p = welch_p_greater(x, y)
         rows.append((claim, arm, against, (a, b), (d, dh, t, p)))
@@ -107,7 +132,11 @@ def confirmatory(arms: dict[str, np.ndarray]) -> str:
              "Holm (family of " f"{len(pvalues)}, 5%) |", "|---|---|---:|---:|---:|---|"]
     for claim, arm, against, (a, b), stats in rows:
         if stats is None:
-            lines.append(f"| {claim} | {arm} - {against}, {a}-{b} | not run | | | |")
+            next(reject)
+            have = ", ".join(f"{name} {arms[name].shape[0] if name in arms else 0} of "
+                             f"{RUNS[instance].get(name, 100)}" for name in (arm, against))
+            lines.append(f"| {claim} | {arm} - {against}, {a}-{b} | not yet run ({have}) "
+                         "| | | |")
             continue
         d, dh, t, p = stats
         verdict = "confirmed" if next(reject) else "not confirmed"
@@ -131,13 +160,15 @@ def not_behind(arms: dict[str, np.ndarray], first: int = 201, last: int = 250) -
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder", type=Path)
+    parser.add_argument("--instance", choices=("simple", "hard"), default="simple",
+                        help="which confirmatory family (default: simple)")
     args = parser.parse_args(argv)
     arms = load(args.folder)
     seeds = json.loads((args.folder / "flat" / "config.json").read_text()).get("seed")
     print(f"seed block from {seeds}; arms: {', '.join(arms)}\n")
     print(windows_table(arms))
     print("\nConfirmatory tests (one-sided Welch, Holm over the family):\n")
-    print(confirmatory(arms))
+    print(confirmatory(arms, args.instance))
     print("\nAt the end, descriptive:\n")
     print(not_behind(arms))
 
