@@ -3,21 +3,20 @@
 This file is the algorithm. :class:`HierarchicalAgent` is SMDP Sarsa over primitives and a
 given set of options; :class:`SkillChainingAgent` is the same agent discovering its options.
 One step of either is one call, :meth:`HierarchicalAgent.transition` (which
-:meth:`SkillChainingAgent.transition` wraps with discovery's per-step record), and reads in
-the paper's order as plain calls into the pieces:
+:meth:`SkillChainingAgent.transition` follows with discovery's per-step record, one call), and
+reads in the paper's order as plain calls into the pieces:
 
 ======================================  =====================================  =======
 the step                                call                                   section
 ======================================  =====================================  =======
 memberships: sets that hold s'          :meth:`membership` (the classifiers)   2, 4.3
-targets: the options' events at s'      :meth:`targets`                        4.2
+targets: the options' events at s'      :meth:`targets` (the predicates)       4.2
 intra-option update of the options      ``option_update``                      2
 option stops: target, 250 steps, end    ``option_stops`` (:meth:`transition`)  2, 5.1
 the next decision at s'                 :meth:`_choose` (epsilon-greedy)       2
 SMDP update of the decision that ended  :meth:`learn` (:class:`SarsaUpdate`)   2
 the action: option policy or primitive  :meth:`_act`                           2
-discovery's per-step record             ``discovery.record``,                  4, 5.1
-                                        ``discovery.after_transition``
+discovery's per-step record             ``discovery.after_transition``         4, 5.1
 ======================================  =====================================  =======
 
 When episodes end, :meth:`SkillChainingAgent.episodes_ended` applies discovery's episode rules
@@ -86,10 +85,7 @@ from skillchain_torch.discovery import (
     InitiationReading,
 )
 from skillchain_torch.discovery.readings import FIRST_READING
-from skillchain_torch.discovery.skill_chaining import (
-    evaluate_base_events,
-    overlap_exclusion,
-)
+from skillchain_torch.discovery.skill_chaining import overlap_exclusion
 from skillchain_torch.discovery.subgoals import SUBGOALS, random_subgoals
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
@@ -110,6 +106,7 @@ from skillchain_torch.options import (
     TerminationPredicate,
 )
 from skillchain_torch.options.goals import goal_event
+from skillchain_torch.options.termination import evaluate_base_events
 from skillchain_torch.policies import epsilon_greedy
 from skillchain_torch.presets import (
     PRESET_FIELDS,
@@ -359,7 +356,7 @@ class HierarchicalAgent(nn.Module):
     # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
     # parameters, buffers and submodules) costs more than the tensor maths for these.
     _PLAIN = frozenset({"step_state", "active", "last_q", "last_phi", "last_value", "_index",
-                        "_raw_contains", "last_available"})
+                        "_raw_contains", "last_available", "last_events"})
     _STEP = frozenset(STEP_FIELDS)  # written into the declared StepState
     # The compiled transition also returns Q(s', d) of the decision in force (last_value).
     WANTS_VALUE = False
@@ -660,8 +657,9 @@ class HierarchicalAgent(nn.Module):
             used = int(bank.target_event.max())
             raise ValueError(f"target event {used} used by a slot, but only {len(self.events)} "
                              f"given")  # fmt: skip
-        fired = evaluate_base_events(self.events, next_obs, terminated, reward)
-        return self.rules.target_indicator(bank, fired, raw)
+        # The base events' values at s' stay in last_events (skill chaining's triggers).
+        self.last_events = evaluate_base_events(self.events, next_obs, terminated, reward)
+        return self.rules.target_indicator(bank, self.last_events, raw)
 
     def _best_decision(self) -> Tensor:
         """``[P]``: ``max_d Q(s', d)`` over the decisions available at ``s'`` (``last_q``)."""
@@ -1039,7 +1037,7 @@ class SkillChainingAgent(HierarchicalAgent):
                 reward: Tensor | None = None) -> Tensor:  # fmt: skip
         # Targets are the classifiers' own sets at s' (kept by membership), not the effective
         # ones in ``contains`` (see SkillChaining.membership).
-        return self.discovery.targets(next_obs, terminated, self.discovery.last_raw, reward)
+        return super().targets(next_obs, terminated, self._raw_contains, reward)
 
     def _start_decisions(self, obs: Tensor, rows: Tensor) -> None:
         super()._start_decisions(obs, rows)
@@ -1060,18 +1058,21 @@ class SkillChainingAgent(HierarchicalAgent):
 
     def transition(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
                    truncated: Tensor, stepped: Tensor) -> dict[str, Tensor]:  # fmt: skip
-        contains, option, value = self.contains, self.option, self.q_decision
+        # At s: what discovery's record of this step reads, before the step replaces it.
+        obs, contains, option, value = self.obs, self.contains, self.option, self.q_decision
+        step = self.duration
+        info = super().transition(next_obs, reward, terminated, truncated, stepped)
         every = self.all_stepped(stepped)  # masks by stepped are then skipped
         executing = option >= 0
-        self.discovery.record(stepped, executing if every else stepped & executing,
-                              self.duration, self.obs)  # fmt: skip
-        info = super().transition(next_obs, reward, terminated, truncated, stepped)
         terminated = as_bool(terminated)
+        starts, self._starts = self._starts, None
         created = self.discovery.after_transition(
-            contains=contains, option=option, value=value,
+            obs=obs, executing=executing if every else stepped & executing, contains=contains,
+            option=option, value=value, step=step, events=self.last_events,
             reached=info["reached"], duration=info["duration"],
             decision_ended=info["decision_ended"],
             terminated=terminated if every else terminated & stepped, stepped=stepped,
+            starts=starts, option_next=self.option,
         )  # fmt: skip
         if bool(created.any()):  # the new slot changes the memberships at s'
             self.contains = torch.where(created[:, None], self.membership(self.obs),
@@ -1082,7 +1083,6 @@ class SkillChainingAgent(HierarchicalAgent):
         value_next = self.last_value  # Q(s', d) of the decision in force (_value_in_force)
         self.q_decision = value_next if every else torch.where(stepped, value_next,
                                                                  self.q_decision)  # fmt: skip
-        self._begin_executions()
         return info
 
     def episodes_ended(self, rows: Tensor) -> None:

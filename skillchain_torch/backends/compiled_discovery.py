@@ -34,8 +34,8 @@ from skillchain_torch.discovery.skill_chaining import (
     SkillChaining,
     event_list,
     exclude_overlap,
-    target_indicator,
 )
+from skillchain_torch.options.bank import target_indicator
 
 __all__ = ["CompiledSkillChaining", "CompiledExecutionTrace", "CompiledRecentStates"]
 
@@ -43,7 +43,7 @@ OBS_DIM = kernels.OBS_DIM  # the trace and ring kernels copy Pinball's 4 numbers
 
 
 def compiled_target_indicator(bank, base_fired: Tensor, contains: Tensor) -> Tensor:
-    """:func:`~skillchain_torch.discovery.skill_chaining.target_indicator`, compiled."""
+    """:func:`~skillchain_torch.options.bank.target_indicator`, compiled."""
     if not kernels.applies(contains, bank.status):
         return target_indicator(bank, base_fired, contains)
     return kernels.target_indicator(bank.parent, bank.target_event, bank.status, base_fired,
@@ -135,14 +135,15 @@ class CompiledSkillChaining(SkillChaining):
         self._triggers_out = (torch.empty(P, E, **b), torch.empty(P, K, **b))
 
     def _triggers(self, contains: Tensor, option: Tensor, sample: Tensor, reached: Tensor,
-                  stepped: Tensor, raw_now: Tensor, raw_next: Tensor) -> Tensor:  # fmt: skip
+                  stepped: Tensor, raw_now: Tensor, raw_next: Tensor,
+                  events: Tensor) -> Tensor:  # fmt: skip
         if not kernels.applies(contains, stepped):
             return super()._triggers(contains, option, sample, reached, stepped, raw_now,
-                                     raw_next)  # fmt: skip
+                                     raw_next, events)  # fmt: skip
         bank = self.bank
         self.gestation_q, base_trig, slot_trig, self.base_now, any_listed, hits = (
             kernels.triggers(bank.parent, bank.target_event, bank.status, self.base_now,
-                             self._base_next, raw_now, raw_next, reached, stepped, sample,
+                             events, raw_now, raw_next, reached, stepped, sample,
                              self.gestation_q, self.max_branching, self._triggers_out))
         if self.recent is not None and hits is not None:  # (the hits of _gestation_hits)
             self._gestation_positives(hits)

@@ -111,7 +111,6 @@ class HierarchicalCollector:
             if len(env.batch_size) != 1:
                 raise ValueError(f"env must have batch_size [P], got {tuple(env.batch_size)}")
             self.stepper = ActiveEnvStepper(env)
-        self.agent = agent
         self.population = int(agent.population)
         self.frames_per_batch = (None if frames_per_batch is None else  # a multiple of P
                                  max(1, int(frames_per_batch) // self.population) * self.population)
@@ -128,20 +127,34 @@ class HierarchicalCollector:
         self._start = torch.zeros(self.population, dtype=torch.int64)  # its episode's start
         self._obs: Tensor | None = None  # s of each active row
         self._retired = False  # agents retired at the last episode end (the rows changed)
+        self.finished = False  # started, and every agent has run its episodes
+        # The active agents' ids and their next actions, as the agent last returned them (it
+        # returns them from begin, observe and observe_ends): the loop asks for nothing else.
+        self.index: Tensor | None = None
+        self._action: Tensor | None = None
+        self.agent = agent
+
+    @property
+    def agent(self):
+        """The agents the collector drives (assigning others reads their rows afresh)."""
+        return self._agent
+
+    @agent.setter
+    def agent(self, agent) -> None:
+        self._agent = agent
+        self.index = agent.index  # a fresh agent: its rows and actions are read again
+        self._action = None
 
     # ------------------------------------------------------------------ iteration
     @property
     def num_active(self) -> int:
-        return int(self.agent.index.numel())
-
-    @property
-    def finished(self) -> bool:
-        return self.started and self.num_active == 0
+        return int(self.index.numel())
 
     def start(self) -> None:
         """Reset every env and let the agents take their first decisions."""
         obs = self.stepper.start()
-        self.agent.begin(obs)
+        self._action = self.agent.begin(obs)
+        self.index = self.agent.index
         self._obs = obs
         device = obs.device
         self._ret = torch.zeros(self.population, dtype=torch.float64, device=device)
@@ -154,10 +167,10 @@ class HierarchicalCollector:
         while self.total_frames < 0 or self.frames < self.total_frames:
             if self.max_frames is not None and self.frames >= self.max_frames:
                 return
-            index = self.agent.index  # the active agents (a batch's rows never change)
+            index = self.index  # the active agents (a batch's rows never change)
             if index.numel() == 0:
                 return
-            yield self._steps(index.clone())
+            yield self._steps(index)
 
     def rollout(self) -> TensorDict:
         """Collect one batch (starting the episodes if needed)."""
@@ -166,28 +179,33 @@ class HierarchicalCollector:
     def _steps(self, index: Tensor) -> TensorDict:
         """Step the active agents ``index`` until the batch ends; the batch ``[T, n]``.
 
-        This loop runs every population step of a run, so its lists are locals. The agent's
-        ``actions`` are kept without a copy: an agent replaces them, it does not write them in
-        place (the built-in agents replace every state tensor)."""
+        This loop runs every population step of a run, so its lists are locals, and it calls
+        the env and the agent once each per step. The agent's actions, decisions and options
+        are kept without a copy: an agent replaces them, it does not write them in place (the
+        built-in agents replace every state tensor)."""
         stepper, agent, schedule = self.stepper, self.agent, self.epsilon
         n = int(index.numel())
         cap = math.inf if self.frames_per_batch is None else max(1, self.frames_per_batch // n)
         limit = math.inf if self.max_frames is None else self.max_frames
         if self.total_frames >= 0:
             limit = min(limit, self.total_frames)
-        decisions = hasattr(type(agent), "decisions")  # (on the class: no property call)
+        # Agents with options declare their per-step state (``step_state``, all P rows): the
+        # decision in force and the executing slot are read from it, not asked for.
+        decisions = hasattr(agent, "step_state")
+        every = n == self.population  # rows are agents: no gather
         record_state = self.state
         first_step = self.global_step + 1
         observations, actions, next_observations, rewards, returns, starts, ends_at = \
             [], [], [], [], [], [], []  # fmt: skip
         decision, option, state, next_state = [], [], [], []
-        action = agent.actions
+        action = agent.actions if self._action is None else self._action
         while True:
             observations.append(self._obs)
             actions.append(action)
             if decisions:
-                decision.append(agent.decisions)
-                option.append(agent.options)
+                held = agent.step_state
+                decision.append(held.decision if every else held.decision[index])
+                option.append(held.option if every else held.option[index])
             if record_state:
                 state.append(stepper.raw_state())
             obs, reward, ends = stepper.step(action)
@@ -207,13 +225,14 @@ class HierarchicalCollector:
                 self._obs = obs
                 if len(rewards) < cap and self.frames < limit:
                     continue
+                self._action = action
                 break
             ends_at.append((len(rewards) - 1, ends))
             self._episode_ends(obs, reward, *ends)
             if (self.frames_per_batch is None or self._retired or len(rewards) >= cap
                     or self.frames >= limit):  # fmt: skip (the rows change: the batch ends)
                 break
-            action = agent.actions
+            action = self._action
         return self._batch(index, first_step, observations, actions, next_observations,
                            rewards, returns, starts, ends_at, decision, option, state,
                            next_state)  # fmt: skip
@@ -222,7 +241,7 @@ class HierarchicalCollector:
                       truncated: Tensor) -> None:  # fmt: skip
         """Restart the rows whose episodes ended (or retire them after their last episode)."""
         rows = (terminated | truncated).nonzero().flatten()
-        agents = self.agent.index[rows]
+        agents = self.index[rows]
         self.episodes_done[agents.cpu()] += 1
         if self.episodes is None:
             finishing = torch.zeros(rows.shape[0], dtype=torch.bool, device=rows.device)
@@ -230,7 +249,8 @@ class HierarchicalCollector:
             finishing = (self.episodes_done[agents.cpu()] >= self.episodes).to(rows.device)
         restart = rows[~finishing]
         start_obs = self.stepper.reset(restart) if restart.numel() else None
-        self.agent.observe_ends(obs, reward, terminated, truncated, restart, start_obs)
+        self._action = self.agent.observe_ends(obs, reward, terminated, truncated, restart,
+                                               start_obs)  # fmt: skip
         self._ret = self._ret.index_fill(0, rows, 0.0)
         self._start = self._start.index_fill(0, rows, self.global_step)
         next_obs = obs.clone()
@@ -244,6 +264,8 @@ class HierarchicalCollector:
             self.stepper.compact(keep)
             self.agent.compact(keep)
             self._ret, self._start, self._obs = self._ret[keep], self._start[keep], self._obs[keep]
+            self.index, self._action = self.index[keep], self._action[keep]
+            self.finished = self.index.numel() == 0
 
     def _batch(self, index, first_step, observations, actions, next_observations, rewards,
                returns, starts, ends_at, decision, option, state, next_state) -> TensorDict:
@@ -274,7 +296,7 @@ class HierarchicalCollector:
     def state_dict(self) -> dict:
         """Progress and every agent's episode so far (``partial_return``/``partial_length``
         ``[P]``), as a checkpoint holds them."""
-        P, index = self.population, self.agent.index
+        P, index = self.population, self.index
         partial_return = torch.zeros(P, dtype=torch.float64)
         partial_length = torch.zeros(P, dtype=torch.int64)
         if self.started:
@@ -291,7 +313,9 @@ class HierarchicalCollector:
         self.global_step = int(state["global_step"])
         self.frames = int(state["agent_steps"])
         self.episodes_done = torch.as_tensor(state["episodes_done"], dtype=torch.int64).clone()
-        index = self.agent.index
+        self.index = index = self.agent.index
+        self._action = None  # read from the agent at the next batch
+        self.finished = self.started and index.numel() == 0
         device = index.device
         self._ret = state["partial_return"].to(device)[index].clone()
         self._start = self.global_step - state["partial_length"].to(device)[index]

@@ -8,7 +8,8 @@ its default; only what runs when an episode ends and is long stays in its own mo
 rule                       where                                               paper value
 =========================  ==================================================  ==============
 target events              :func:`targeting`, :func:`event_list`,              goal
-                           :func:`target_indicator`, :func:`entered`
+                           :func:`entered` (at a state: the option bank's
+                           :func:`~skillchain_torch.options.bank.target_indicator`)
 no overlap                 :func:`overlap_exclusion`, :func:`exclude_overlap`  siblings, parent
 initiation-set examples,   :class:`ExecutionTrace`,                            250 steps
 dropped failed updates     :meth:`SkillChaining._finish_executions`
@@ -21,13 +22,16 @@ chaining + distance        :meth:`SkillChaining.end_episodes`                  0
 constraint
 =========================  ==================================================  ==============
 
-The agent (:class:`~skillchain_torch.agents.SkillChainingAgent`) calls it at four points, and
-they read here in that order: :meth:`~SkillChaining.membership` / :meth:`~SkillChaining.targets`
-while it evaluates a state, :meth:`~SkillChaining.record` before each transition,
-:meth:`~SkillChaining.after_transition` after its updates (executions that ended, gestation
-samples, creation), and :meth:`~SkillChaining.end_episodes` when episodes end (learned sets
-become targets, gestation ends). Every operation is row-wise (no reduction across agents), so
-agent p's options are created, learned and chained identically alone or in a population.
+The agent (:class:`~skillchain_torch.agents.SkillChainingAgent`) calls it at three points, and
+they read here in that order: :meth:`~SkillChaining.membership` while it evaluates a state,
+:meth:`~SkillChaining.after_transition` once per step after its updates (the step's record,
+executions that ended, gestation samples, creation, executions that start), and
+:meth:`~SkillChaining.end_episodes` when episodes end (learned sets become targets, gestation
+ends). The target events at a state are the agent's to evaluate (the termination predicates,
+then the bank's :func:`~skillchain_torch.options.bank.target_indicator`); it hands their values
+to :meth:`~SkillChaining.after_transition`. Every operation is row-wise (no reduction across
+agents), so agent p's options are created, learned and chained identically alone or in a
+population.
 
 Discovery events (``created``, ``joined``, ``learned``, ``slots_full``) are appended to
 :attr:`~SkillChaining.log` as :class:`DiscoveryEvent` for loggers to drain.
@@ -59,8 +63,10 @@ from skillchain_torch.options import (
     OptionStatus,
     TerminationPredicate,
 )
+from skillchain_torch.options.bank import target_indicator
 from skillchain_torch.options.initiation_fit import check_fittable
 from skillchain_torch.options.status import slot_mask
+from skillchain_torch.options.termination import evaluate_base_events
 
 from .convergence import CONVERGENCE_EPISODES, CONVERGENCE_THRESHOLD, ConvergenceTest
 from .gestation import (
@@ -222,7 +228,6 @@ class SkillChaining:
         n = reading.gestation_positives
         self.recent = (self.recent_class(P, n, device=device, obs_dim=bank.obs_dim)
                        if n > 0 else None)  # fmt: skip
-        self._base_next = self.base_now
         self._exclusion: Tensor | None = None
 
     # ------------------------------------------------------------------ evaluation
@@ -241,16 +246,6 @@ class SkillChaining:
             self._exclusion = overlap_exclusion(self.bank)
         return self.exclude_overlap(contains, self._exclusion, self.bank.classifier.trained)
 
-    def targets(self, next_obs: Tensor, terminated: Tensor, contains: Tensor,
-                reward: Tensor | None = None) -> Tensor:  # fmt: skip
-        """Every option's target event at ``s'`` ``[P, K]``; keeps the base events' values.
-
-        ``contains``: the classifiers' own sets at ``s'`` (:attr:`last_raw`), not the
-        effective ones (see :meth:`membership`); ``reward``: the transition's, for a goal over
-        the transition."""
-        self._base_next = evaluate_base_events(self.events, next_obs, terminated, reward)
-        return self.target_indicator(self.bank, self._base_next, contains)
-
     def start_episodes(self, obs: Tensor, rows: Tensor) -> None:
         """Agents ``rows [P]`` start an episode at ``obs [P, 4]``."""
         fired = evaluate_base_events(self.events, obs, torch.zeros_like(rows))
@@ -260,48 +255,60 @@ class SkillChaining:
             self.recent.start_episodes(rows)
 
     # ------------------------------------------------------------------ per step
-    def record(self, stepped: Tensor, executing: Tensor, step: Tensor, obs: Tensor) -> None:
-        """Before a transition, discovery's per-step record: agents ``stepped [P]`` act in
-        ``obs [P, 4]`` (kept for the gestation positives of the reading, if it has them), and
-        the ``executing`` ones as step ``step`` of their option's execution (its examples)."""
-        if self.recent is not None:
-            self.recent.record(stepped, obs)
-        self.trace.record(executing, step, obs)  # (rows outside executing are skipped)
-
     def start_executions(self, rows: Tensor, slot: Tensor) -> None:
         """Agents ``rows [P]`` start executing ``slot [P]`` (after this step's updates)."""
         self.trace.start(rows, slot)  # (nothing when no row starts)
 
-    def after_transition(self, *, contains: Tensor, option: Tensor, value: Tensor,
-                         reached: Tensor, duration: Tensor,
-                         decision_ended: Tensor, terminated: Tensor,
-                         stepped: Tensor) -> Tensor:  # fmt: skip
-        """Apply the rules to the transitions ``s -> s'`` of the rows in ``stepped [P]``.
+    def after_transition(self, *, obs: Tensor, executing: Tensor, contains: Tensor,
+                         option: Tensor, value: Tensor, step: Tensor, events: Tensor,
+                         reached: Tensor, duration: Tensor, decision_ended: Tensor,
+                         terminated: Tensor, stepped: Tensor, starts: Tensor | None = None,
+                         option_next: Tensor | None = None) -> Tensor:  # fmt: skip
+        """Discovery's record of the transitions ``s -> s'`` of the rows in ``stepped [P]``,
+        and its rules applied to them: one call per step, after the agent's updates.
 
         Args:
-            contains, option, value: at ``s``: memberships ``[P, K]``, the executing slot
-                (-1 none), and the top-level ``Q(s, d) [P]`` of the decision d in force.
-            reached: at ``s'``: each option's target ``[P, K]`` (in the classifiers' own sets).
-            duration, decision_ended: the decision's steps so far and whether it ended now.
+            obs, executing, contains, option, value, step: at ``s``: the state ``[P, 4]``, the
+                agents executing an option (``[P]``, within ``stepped``), memberships
+                ``[P, K]``, the executing slot (-1 none), the top-level ``Q(s, d) [P]`` of the
+                decision d in force, and the execution's step count there.
+            events, reached: at ``s'``: the base events ``[P, E]`` and each option's target
+                ``[P, K]`` (in the classifiers' own sets).
+            duration, decision_ended: the decision's steps, this one included, and whether it
+                ended now.
             terminated: the episode terminated at ``s'`` ``[P]``.
+            starts, option_next: the agents that took an option as their new decision at
+                ``s'`` (``None``: none) and the slot each executes from there.
 
-        Target events are entered and reached in the classifiers' own sets (:attr:`raw_now`
-        at ``s``, :attr:`last_raw` at ``s'``); ``contains`` (effective) decides coverage.
+        In order: the record (the state, kept for a reading's gestation positives, and each
+        executing agent's state as a step of its execution, its examples); the executions that
+        ended (examples, refits, dropped updates); the gestation samples and the triggered
+        creations; the executions that start. Target events are entered and reached in the
+        classifiers' own sets (:attr:`raw_now` at ``s``, :attr:`last_raw` at ``s'``);
+        ``contains`` (effective) decides coverage.
 
         Returns:
             ``BoolTensor [P]``: agents that created an option (their memberships at ``s'``
             must be re-evaluated by the caller: the new slot changed them, and
             :meth:`created_rows_evaluated` then takes their own sets).
         """
+        if self.recent is not None:
+            self.recent.record(stepped, obs)
+        self.trace.record(executing, step, obs)  # (rows outside executing are skipped)
         raw_now, raw_next = self.raw_now, self.last_raw
         self.raw_now = torch.where(stepped[:, None], raw_next, raw_now)
         self._finish_executions(option, reached, duration, decision_ended & stepped,
                                 terminated)  # fmt: skip
         sample = value.detach()  # Q(s, d) of the decision in force (a value, no graph)
-        return self._triggers(contains, option, sample, reached, stepped, raw_now, raw_next)
+        created = self._triggers(contains, option, sample, reached, stepped, raw_now, raw_next,
+                                 events)  # fmt: skip
+        if starts is not None and bool(starts.any()):  # (their slots existed before creation)
+            self.trace.start(starts, option_next)
+        return created
 
     def _triggers(self, contains: Tensor, option: Tensor, sample: Tensor, reached: Tensor,
-                  stepped: Tensor, raw_now: Tensor, raw_next: Tensor) -> Tensor:  # fmt: skip
+                  stepped: Tensor, raw_now: Tensor, raw_next: Tensor,
+                  events: Tensor) -> Tensor:  # fmt: skip
         """Gestation samples and positives, the target events this transition entered, and
         the creations they trigger (:meth:`after_transition`); the agents that created."""
         bank = self.bank
@@ -313,10 +320,10 @@ class SkillChaining:
             fired = entered(before, reached) & gestating & stepped[:, None]
             self.gestation_q = torch.where(fired, torch.maximum(self.gestation_q, sample[:, None]),
                                            self.gestation_q)  # fmt: skip
-        base_trig = entered(self.base_now, self._base_next) & stepped[:, None]
+        base_trig = entered(self.base_now, events) & stepped[:, None]
         slot_trig = entered(raw_now, raw_next) & stepped[:, None]
         slot_trig = slot_trig & (bank.status == OptionStatus.LEARNED)
-        self.base_now = torch.where(stepped[:, None], self._base_next, self.base_now)
+        self.base_now = torch.where(stepped[:, None], events, self.base_now)
         created = torch.zeros_like(stepped)
         if bool(base_trig.any()) or bool(slot_trig.any()):
             created = self._create(base_trig, slot_trig, contains, option, sample)
@@ -626,43 +633,6 @@ def event_list(bank: OptionBank, num_base: int,
     base_on = base.sum(1) < max_branching
     slot_on = (bank.status == OptionStatus.LEARNED) & (slot.sum(1) < max_branching)
     return base_on, slot_on
-
-
-def evaluate_base_events(events: Sequence[TerminationPredicate], obs: Tensor,
-                         terminated: Tensor, reward: Tensor | None = None) -> Tensor:  # fmt: skip
-    """``BoolTensor [P, E]``: every base event's indicator at ``obs [P, 4]``; an event with
-    ``wants_reward`` (a goal over the transition, :mod:`~skillchain_torch.options.goals`) also
-    gets the transition's ``reward [P]``."""
-    if not events:
-        return torch.zeros(obs.shape[0], 0, dtype=torch.bool, device=obs.device)
-    if len(events) == 1:  # the paper's goal alone, every step: a view, not a stack
-        fired = _fire(events[0], obs, terminated, reward)
-        return (fired if fired.device == obs.device else fired.to(obs.device)).unsqueeze(-1)
-    return torch.stack([_fire(e, obs, terminated, reward).to(obs.device) for e in events],
-                       dim=-1)  # fmt: skip
-
-
-def _fire(event: TerminationPredicate, obs: Tensor, terminated: Tensor,
-          reward: Tensor | None) -> Tensor:  # fmt: skip
-    if getattr(event, "wants_reward", False):
-        return event(obs, terminated, reward)
-    return event(obs, terminated)
-
-
-def target_indicator(bank: OptionBank, base_fired: Tensor, contains: Tensor) -> Tensor:
-    """``[P, K]``: each live slot's target event at a state, from the base events' values
-    ``base_fired [P, E]`` and the initiation-set memberships ``contains [P, K]`` there.
-
-    The same answer as :meth:`OptionBank.target_reached`, without evaluating any event again.
-    """
-    chained = bank.parent >= 0
-    from_parent = contains.gather(1, bank.parent.clamp(min=0))
-    if base_fired.shape[1] == 0:
-        from_base = torch.zeros_like(from_parent)
-    else:
-        index = bank.target_event.clamp(min=0, max=base_fired.shape[1] - 1)
-        from_base = base_fired.gather(1, index) & (bank.target_event >= 0)
-    return torch.where(chained, from_parent, from_base) & bank.live()
 
 
 def entered(before: Tensor, after: Tensor) -> Tensor:

@@ -380,3 +380,19 @@ class OptionBank(nn.Module):
 
     def extra_repr(self) -> str:
         return f"population={self.population}, slots={self.slots}"
+
+
+def target_indicator(bank: OptionBank, base_fired: Tensor, contains: Tensor) -> Tensor:
+    """``[P, K]``: each live slot's target event at a state, from the base events' values
+    ``base_fired [P, E]`` and the initiation-set memberships ``contains [P, K]`` there.
+
+    The same answer as :meth:`OptionBank.target_reached`, without evaluating any event again.
+    """
+    chained = bank.parent >= 0
+    from_parent = contains.gather(1, bank.parent.clamp(min=0))
+    if base_fired.shape[1] == 0:
+        from_base = torch.zeros_like(from_parent)
+    else:
+        index = bank.target_event.clamp(min=0, max=base_fired.shape[1] - 1)
+        from_base = base_fired.gather(1, index) & (bank.target_event >= 0)
+    return torch.where(chained, from_parent, from_base) & bank.live()

@@ -163,3 +163,31 @@ class LambdaEvent:
 
     def __repr__(self) -> str:
         return f"LambdaEvent(name={self.name!r})"
+
+
+def evaluate_base_events(events: Sequence[TerminationPredicate], obs: Tensor,
+                         terminated: Tensor, reward: Tensor | None = None) -> Tensor:  # fmt: skip
+    """``BoolTensor [P, E]``: every base event's indicator at ``obs [P, 4]``; an event with
+    ``wants_reward`` (a goal over the transition, :mod:`~skillchain_torch.options.goals`) also
+    gets the transition's ``reward [P]``.
+
+    Example:
+        >>> obs = torch.tensor([[0.9, 0.2, 0.5, 0.5]], dtype=torch.float64)
+        >>> evaluate_base_events((GoalEvent(), RegionEvent((0.9, 0.2), 0.05)), obs,
+        ...                      torch.tensor([False])).tolist()
+        [[False, True]]
+    """
+    if not events:
+        return torch.zeros(obs.shape[0], 0, dtype=torch.bool, device=obs.device)
+    if len(events) == 1:  # the paper's goal alone, every step: a view, not a stack
+        fired = _fire(events[0], obs, terminated, reward)
+        return (fired if fired.device == obs.device else fired.to(obs.device)).unsqueeze(-1)
+    return torch.stack([_fire(e, obs, terminated, reward).to(obs.device) for e in events],
+                       dim=-1)  # fmt: skip
+
+
+def _fire(event: TerminationPredicate, obs: Tensor, terminated: Tensor,
+          reward: Tensor | None) -> Tensor:  # fmt: skip
+    if getattr(event, "wants_reward", False):
+        return event(obs, terminated, reward)
+    return event(obs, terminated)

@@ -150,15 +150,16 @@ def test_after_transition_equals_torch(positives, monkeypatch):
                            reading=InitiationReading(gestation_positives=positives))
         if positives:  # a few states of this episode behind each agent
             for t in range(4):
-                sc.record(torch.ones(P, dtype=torch.bool), torch.zeros(P, dtype=torch.bool),
-                          torch.zeros(P, dtype=torch.int64),
-                          torch.full((P, 4), 0.1 * t, dtype=torch.float64))
+                sc.recent.record(torch.ones(P, dtype=torch.bool),
+                                 torch.full((P, 4), 0.1 * t, dtype=torch.float64))
         sc.base_now = flags((P, 1), 4, 0.2)
-        sc._base_next = flags((P, 1), 5, 0.3)
         sc.raw_now, sc.last_raw = flags((P, K), 7), flags((P, K), 8)  # own sets at s, s'
         sc.gestation_q = torch.randn(P, K, dtype=torch.float64,
                                      generator=torch.Generator().manual_seed(6))
+        no = torch.zeros(P, dtype=torch.bool)
         created = sc.after_transition(
+            obs=torch.full((P, 4), 0.5, dtype=torch.float64), executing=no,
+            step=torch.zeros(P, dtype=torch.int64), events=flags((P, 1), 5, 0.3),
             contains=flags((P, K), 7), option=torch.full((P,), -1), value=torch.linspace(
                 -1, 1, P, dtype=torch.float64),
             reached=flags((P, K), 10), duration=torch.ones(P, dtype=torch.int64),

@@ -94,3 +94,69 @@ def test_trainer_mode_batches_end_where_episodes_end_and_retire_agents():
         steps = td["next", "step_count"][-1, ended, 0]
         assert bool((steps == 30).all())  # truncated at 30 steps, counted from its start
     assert ends == 4 and "state" not in td.keys()
+
+
+class CountingAgent:
+    """A protocol-only agent (no declared step state) that delegates to a built-in one and
+    counts what the collector asks of it."""
+
+    def __init__(self, agent):
+        import collections
+
+        self.inner, self.calls, self.population = agent, collections.Counter(), agent.population
+
+    def _count(self, name):
+        self.calls[name] += 1
+        return getattr(self.inner, name)
+
+    def begin(self, obs):
+        return self._count("begin")(obs)
+
+    def observe(self, obs, reward):
+        return self._count("observe")(obs, reward)
+
+    def observe_ends(self, *args):
+        return self._count("observe_ends")(*args)
+
+    def compact(self, keep):
+        return self._count("compact")(keep)
+
+    @property
+    def actions(self):
+        return self._count("actions")
+
+    @property
+    def index(self):
+        return self._count("index")
+
+    def flush(self):
+        return self._count("flush")()
+
+    def state_dict(self):
+        return self.inner.state_dict()
+
+    def load_state_dict(self, state):
+        return self.inner.load_state_dict(state)
+
+
+def test_the_collector_asks_the_agent_once_per_step():
+    """Per step the collector calls the agent once (``observe``, or ``observe_ends`` where
+    episodes ended): the actions and the active rows are what the agent returned and what the
+    collector retired, never asked for again; the batches are those of the agent driven
+    directly (whose decisions the collector reads from its declared step state)."""
+    env, agent = make(population=3, max_episode_steps=25)
+    plain = list(HierarchicalCollector(env, agent, episodes=3, state=False))
+    env, agent = make(population=3, max_episode_steps=25)
+    counting = CountingAgent(agent)
+    collector = HierarchicalCollector(env, counting, episodes=3, state=False)
+    batches = list(collector)
+    steps = sum(td.batch_size[0] for td in batches)
+    assert steps == 75 and collector.finished and collector.num_active == 0
+    assert counting.calls["observe"] + counting.calls["observe_ends"] == steps
+    assert counting.calls["observe_ends"] == 3 and counting.calls["compact"] == 1
+    assert counting.calls["actions"] == 0 and counting.calls["index"] <= 2  # built, started
+    assert len(batches) == len(plain)
+    for td, want in zip(batches, plain):
+        for key in ("agent", "observation", "action", ("next", "reward"), ("next", "done")):
+            assert torch.equal(td[key], want[key])
+        assert "decision" in want.keys() and "decision" not in td.keys()
