@@ -276,3 +276,18 @@ def test_the_commit_is_read_when_the_run_starts(tmp_path, monkeypatch):
     out = tmp_path / "run"
     assert main(["train", "--out", str(out), *SMALL]) == 0
     assert json.loads((out / "run_info.json").read_text())["commit"] == "aaaa"
+
+
+def test_every_subcommand_help_reads_plainly():
+    """Each subcommand's help formats: no literal ``%%`` (argparse %-formats help strings, not
+    descriptions)."""
+    import argparse
+
+    from skillchain_torch.trainers.config.arguments import build_parser
+
+    parser = build_parser()
+    [sub] = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    assert {"train", "eval", "plot", "verify"} <= set(sub.choices)
+    for name, command in sub.choices.items():
+        text = command.format_help()
+        assert "%%" not in text, f"skillchain {name} --help shows %%"

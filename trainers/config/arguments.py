@@ -261,7 +261,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Load RUN_DIR's agents from its last checkpoint, freeze them (no learning, "
         "no discovery) and run --episodes episodes each, greedy unless --epsilon, every episode "
         "cut at --max-steps; print each agent's mean return and the mean over agents with its "
-        "95%% interval. --render FILE.gif draws one agent's episodes.",
+        "95% interval. --render FILE.gif draws one agent's episodes.",
     )
     evaluate.add_argument("dir", type=Path, help="run directory (with checkpoints/)")
     evaluate.add_argument("--episodes", type=_positive, default=10,
@@ -284,9 +284,9 @@ def build_parser() -> argparse.ArgumentParser:
     plot = sub.add_parser(
         "plot",
         help="draw several runs' learning curves in one figure and print their window table",
-        description="Learning curves of finished runs with 95%% bands in one figure (--out), "
-        "and a table per episode window: each run's mean with its 95%% t interval and each "
-        "run minus the first with Welch's 95%% interval (*: it excludes 0).",
+        description="Learning curves of finished runs with 95% bands in one figure (--out), "
+        "and a table per episode window: each run's mean with its 95% t interval and each "
+        "run minus the first with Welch's 95% interval (*: it excludes 0).",
     )
     from skillchain_torch.trainers.study.compare import add_plot_arguments
 
