@@ -18,8 +18,12 @@ the ``GymEnv`` stepper step for step):
 Its state (positions, velocities, step counts and each agent's generator) is saved, so a run
 on it resumes from a checkpoint, which the ``GymEnv`` stepper cannot.
 
-:func:`batched_stepper` is the one place that picks it: for ``gymnasium:MountainCar-v0`` it
-returns this stepper, for any other env ``None`` (the general stepper).
+:class:`AcrobotStepper` does the same for Acrobot-v1 (the "book" dynamics, one RK4 step per
+action, Gymnasium's wrap and bounds, its 500-step limit); its squares go through ``pow`` as
+Gymnasium's NumPy scalars do (see :meth:`AcrobotStepper._dsdt`).
+
+:func:`batched_stepper` is the one place that picks them: for ``gymnasium:MountainCar-v0`` and
+``gymnasium:Acrobot-v1`` it returns theirs, for any other env ``None`` (the general stepper).
 
 Example:
     >>> from skillchain_torch.envs.external import make_env, read_specs
@@ -39,7 +43,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["MountainCarStepper", "batched_stepper", "BATCHED_IDS"]
+__all__ = ["MountainCarStepper", "AcrobotStepper", "batched_stepper", "BATCHED_IDS"]
 
 
 class MountainCarStepper:
@@ -148,13 +152,170 @@ class MountainCarStepper:
             rng.bit_generator.state = saved
 
 
-BATCHED_IDS = ("MountainCar-v0",)
+class AcrobotStepper:
+    """P Acrobot-v1 envs stepped as one batch (the ``EnvStepper`` protocol), with Gymnasium's
+    ``AcrobotEnv.step`` arithmetic ("book" dynamics, one RK4 step of 0.2 s) vectorised over the
+    agents: the same observations, rewards and ends bit for bit, checked against one ``GymEnv``
+    per agent in ``tests/envs/test_classic.py``.
+
+    Args:
+        population: P, one acrobot per agent.
+        sizes: the env's :class:`~skillchain_torch.envs.external.EnvSizes` (from its specs).
+        seed: agent p's acrobot draws its starts from ``np_random(seed + p)``.
+        max_episode_steps: truncate after this many steps as well (``None``: Gymnasium's 500
+            alone).
+
+    Example:
+        >>> from skillchain_torch.envs.external import make_env, read_specs
+        >>> arms = AcrobotStepper(2, read_specs(make_env("gymnasium:Acrobot-v1")), seed=0)
+        >>> arms.start().shape
+        torch.Size([2, 6])
+        >>> obs, reward, ends = arms.step(torch.tensor([0, 2]))
+        >>> reward.tolist(), ends
+        ([-1.0, -1.0], None)
+    """
+
+    # gymnasium.envs.classic_control.AcrobotEnv's constants
+    DT = 0.2
+    LINK_LENGTH_1, LINK_MASS_1, LINK_MASS_2 = 1.0, 1.0, 1.0
+    LINK_COM_POS_1, LINK_COM_POS_2, LINK_MOI = 0.5, 0.5, 1.0
+    MAX_VEL_1, MAX_VEL_2 = 4 * np.pi, 9 * np.pi
+    AVAIL_TORQUE = np.array([-1.0, 0.0, 1.0])
+    TIME_LIMIT = 500  # Acrobot-v1's TimeLimit
+
+    def __init__(self, population: int, sizes, seed: int = 0,
+                 max_episode_steps: int | None = None):  # fmt: skip
+        from gymnasium.utils.seeding import np_random
+
+        self.population, self.sizes = int(population), sizes
+        self.max_episode_steps = max_episode_steps
+        self.rngs = [np_random(int(seed) + p)[0] for p in range(self.population)]
+        for rng in self.rngs:  # GymEnv.set_seed resets once with the seed: that draw is spent
+            rng.uniform(low=-0.1, high=0.1, size=(4,))
+        self.state = np.zeros((self.population, 4), dtype=np.float64)
+        self._count = np.zeros(self.population, dtype=np.int64)
+        self.index = torch.arange(self.population)
+
+    @property
+    def num_active(self) -> int:
+        return int(self.index.numel())
+
+    def _obs(self, rows: np.ndarray) -> Tensor:
+        s = self.state[rows]
+        obs = np.stack([np.cos(s[:, 0]), np.sin(s[:, 0]), np.cos(s[:, 1]), np.sin(s[:, 1]),
+                        s[:, 2], s[:, 3]], axis=1).astype(np.float32)  # fmt: skip
+        return self.sizes.scale(torch.from_numpy(obs))
+
+    def _reset_rows(self, rows: np.ndarray) -> None:
+        for p in rows.tolist():  # each from its own generator, as AcrobotEnv.reset (float32)
+            start = self.rngs[p].uniform(low=-0.1, high=0.1, size=(4,)).astype(np.float32)
+            self.state[p] = start
+            self._count[p] = 0
+
+    def start(self) -> Tensor:
+        """Reset every acrobot; all active; observations ``[P, 6]``, mapped by the specs."""
+        self.index = torch.arange(self.population)
+        rows = np.arange(self.population)
+        self._reset_rows(rows)
+        return self._obs(rows)
+
+    def _dsdt(self, y: np.ndarray) -> np.ndarray:
+        """``AcrobotEnv._dsdt`` ("book") for rows ``y [n, 5]`` (the state and the torque),
+        each product and sum in Gymnasium's order. Its squares of NumPy scalars are ``pow``
+        (``x**2`` of an array is ``x * x``, which rounds differently on ~0.1% of arguments),
+        hence ``float_power``; the squares of Python constants stay Python's."""
+        def sq(x):
+            return np.float_power(x, 2.0)
+
+        m1, m2, l1 = self.LINK_MASS_1, self.LINK_MASS_2, self.LINK_LENGTH_1
+        lc1, lc2, I1, I2, g, pi = self.LINK_COM_POS_1, self.LINK_COM_POS_2, self.LINK_MOI, \
+            self.LINK_MOI, 9.8, np.pi  # fmt: skip
+        a = y[:, 4]
+        theta1, theta2, dtheta1, dtheta2 = y[:, 0], y[:, 1], y[:, 2], y[:, 3]
+        d1 = m1 * lc1**2 + m2 * (l1**2 + lc2**2 + 2 * l1 * lc2 * np.cos(theta2)) + I1 + I2
+        d2 = m2 * (lc2**2 + l1 * lc2 * np.cos(theta2)) + I2
+        phi2 = m2 * lc2 * g * np.cos(theta1 + theta2 - pi / 2.0)
+        phi1 = (-m2 * l1 * lc2 * sq(dtheta2) * np.sin(theta2)
+                - 2 * m2 * l1 * lc2 * dtheta2 * dtheta1 * np.sin(theta2)
+                + (m1 * lc1 + m2 * l1) * g * np.cos(theta1 - pi / 2) + phi2)  # fmt: skip
+        ddtheta2 = (a + d2 / d1 * phi1 - m2 * l1 * lc2 * sq(dtheta1) * np.sin(theta2) - phi2) \
+            / (m2 * lc2**2 + I2 - sq(d2) / d1)  # fmt: skip
+        ddtheta1 = -(d2 * ddtheta2 + phi1) / d1
+        return np.stack([dtheta1, dtheta2, ddtheta1, ddtheta2, np.zeros_like(a)], axis=1)
+
+    def step(self, action: Tensor):
+        """Step the active rows: ``(observation [n, 6], reward [n], ends)``; ``ends`` is
+        ``None`` when no episode ended, else ``(terminated, truncated)`` bool ``[n]``."""
+        rows = self.index.numpy()
+        a = action.detach().to("cpu", torch.int64).numpy()
+        y0 = np.concatenate([self.state[rows], self.AVAIL_TORQUE[a][:, None]], axis=1)
+        # rk4(self._dsdt, s_augmented, [0, dt]): one step
+        dt = self.DT - 0
+        dt2 = dt / 2.0
+        k1 = self._dsdt(y0)
+        k2 = self._dsdt(y0 + dt2 * k1)
+        k3 = self._dsdt(y0 + dt2 * k2)
+        k4 = self._dsdt(y0 + dt * k3)
+        ns = (y0 + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4))[:, :4]
+        for i in (0, 1):  # wrap(ns[i], -pi, pi): one period at a time, as Gymnasium's loops
+            while (ns[:, i] > np.pi).any():
+                ns[:, i] = np.where(ns[:, i] > np.pi, ns[:, i] - 2 * np.pi, ns[:, i])
+            while (ns[:, i] < -np.pi).any():
+                ns[:, i] = np.where(ns[:, i] < -np.pi, ns[:, i] + 2 * np.pi, ns[:, i])
+        ns[:, 2] = np.minimum(np.maximum(ns[:, 2], -self.MAX_VEL_1), self.MAX_VEL_1)
+        ns[:, 3] = np.minimum(np.maximum(ns[:, 3], -self.MAX_VEL_2), self.MAX_VEL_2)
+        self.state[rows] = ns
+        self._count[rows] += 1
+        terminated = -np.cos(ns[:, 0]) - np.cos(ns[:, 1] + ns[:, 0]) > 1.0
+        limit = self.TIME_LIMIT if self.max_episode_steps is None else min(
+            self.TIME_LIMIT, self.max_episode_steps)
+        truncated = (self._count[rows] >= limit) & ~terminated
+        obs = self._obs(rows)
+        reward = torch.from_numpy(np.where(terminated, 0.0, -1.0))
+        if not (terminated.any() or truncated.any()):
+            return obs, reward, None
+        return obs, reward, (torch.from_numpy(terminated), torch.from_numpy(truncated))
+
+    def reset(self, rows: Tensor) -> Tensor:
+        """Restart the acrobots of compact ``rows``; their observations ``[len(rows), 6]``."""
+        arms = self.index[rows].numpy()
+        self._reset_rows(arms)
+        return self._obs(arms)
+
+    def compact(self, keep: Tensor) -> None:
+        """Keep only the rows where ``keep`` (bool ``[n]``); the others stop stepping."""
+        self.index = self.index[keep.nonzero().flatten()]
+
+    def sync(self) -> None:
+        """Nothing to write back: the acrobots' state is this object's."""
+
+    def state_dict(self) -> dict:
+        return {"kind": "acrobot", "index": self.index.clone(),
+                "state": torch.from_numpy(self.state.copy()),
+                "step_count": torch.from_numpy(self._count.copy()),
+                "rngs": [rng.bit_generator.state for rng in self.rngs]}  # fmt: skip
+
+    def load_state_dict(self, state: dict) -> None:
+        if state.get("kind") != "acrobot" or len(state["rngs"]) != self.population:
+            raise ValueError(f"the saved env state is not of {self.population} batched "
+                             f"Acrobot envs (kind {state.get('kind')!r})")  # fmt: skip
+        self.index = state["index"].clone()
+        self.state = state["state"].numpy().copy()
+        self._count = state["step_count"].numpy().copy()
+        for rng, saved in zip(self.rngs, state["rngs"]):
+            rng.bit_generator.state = saved
+
+
+BATCHED = {"MountainCar-v0": MountainCarStepper, "Acrobot-v1": AcrobotStepper}
+BATCHED_IDS = tuple(BATCHED)
 
 
 def batched_stepper(env: str, population: int, sizes, seed: int = 0,
                     max_episode_steps: int | None = None):  # fmt: skip
-    """The batched stepper of ``env`` (``"gymnasium:MountainCar-v0"``), or ``None`` where
-    there is none (the trainer then steps one ``GymEnv`` per agent)."""
-    if env.rpartition(":")[2] != "MountainCar-v0" or env.count(":") != 1:
+    """The batched stepper of ``env`` (``"gymnasium:MountainCar-v0"``,
+    ``"gymnasium:Acrobot-v1"``), or ``None`` where there is none (the trainer then steps one
+    ``GymEnv`` per agent)."""
+    kind = BATCHED.get(env.rpartition(":")[2])
+    if kind is None or env.count(":") != 1:
         return None  # (a MODULE:ID env is the user's own, whatever its name)
-    return MountainCarStepper(population, sizes, seed=seed, max_episode_steps=max_episode_steps)
+    return kind(population, sizes, seed=seed, max_episode_steps=max_episode_steps)

@@ -1,6 +1,7 @@
-"""The batched MountainCar (issue 53): the same observations, rewards, ends and restarts as one
-TorchRL ``GymEnv`` per agent, step for step; the trainer picks it and gets the same run bit for
-bit; agent p alone equals agent p in a population; a run on it resumes from a checkpoint."""
+"""The batched MountainCar and Acrobot (issue 53): the same observations, rewards, ends and
+restarts as one TorchRL ``GymEnv`` per agent, step for step; the trainer picks them and gets the
+same run bit for bit; agent p alone equals agent p in a population; a run on them resumes from a
+checkpoint."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import pytest
 import torch
 
 from skillchain_torch.envs import classic
-from skillchain_torch.envs.classic import MountainCarStepper, batched_stepper
+from skillchain_torch.envs.classic import AcrobotStepper, MountainCarStepper, batched_stepper
 from skillchain_torch.envs.external import make_env, read_specs
 from skillchain_torch.trainers import TrainConfig
 from skillchain_torch.trainers.loop.env_stepper import EnvStepper
@@ -66,10 +67,71 @@ def test_step_for_step_the_same_as_one_gym_env_per_agent(sizes, max_episode_step
     assert all(n > 0 for n in counts.values()), counts  # every branch of the step was taken
 
 
-def test_only_mountain_car_gets_the_batched_stepper(sizes):
+ACROBOT = "gymnasium:Acrobot-v1"
+
+
+@pytest.mark.parametrize("max_episode_steps", [None, 300])
+def test_acrobot_step_for_step_the_same_as_one_gym_env_per_agent(max_episode_steps):
+    """Energy pumping (the torque along the second joint's velocity, with some random
+    actions) reaches the line, random actions run into the time limit (agents 0 and 3); every
+    observation, reward, end and restart is Gymnasium's, bit for bit."""
+    sizes = read_specs(make_env(ACROBOT))
+    P, seed = 5, 11
+    gym = EnvStepper([make_env(ACROBOT) for _ in range(P)], sizes, seed=seed,
+                     max_episode_steps=max_episode_steps)  # fmt: skip
+    arms = AcrobotStepper(P, sizes, seed=seed, max_episode_steps=max_episode_steps)
+    assert torch.equal(gym.start(), arms.start())
+    generator = torch.Generator().manual_seed(0)
+    counts = {"terminated": 0, "truncated": 0, "wrapped": 0}
+    for step in range(3000):
+        push = torch.where(torch.from_numpy(arms.state[arms.index.numpy(), 3]) >= 0, 2, 0)
+        random = torch.randint(0, 3, push.shape, generator=generator)
+        share = torch.where(arms.index % 3 == 0, 1.0, 0.3)  # agents 0 and 3 act at random
+        action = torch.where(torch.rand(push.shape, generator=generator) < share, random, push)
+        before = arms.state[arms.index.numpy(), :2].copy()
+        a, b = gym.step(action), arms.step(action)
+        assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1]), step
+        assert (a[2] is None) == (b[2] is None), step
+        after = arms.state[arms.index.numpy(), :2]
+        counts["wrapped"] += int((np.abs(after - before) > np.pi).sum())
+        if a[2] is not None:
+            assert torch.equal(a[2][0], b[2][0]) and torch.equal(a[2][1], b[2][1]), step
+            counts["terminated"] += int(a[2][0].sum())
+            counts["truncated"] += int(a[2][1].sum())
+            rows = (a[2][0] | a[2][1]).nonzero().flatten()
+            assert torch.equal(gym.reset(rows), arms.reset(rows)), step
+        if step == 2500:
+            keep = torch.arange(gym.num_active) % 2 == 0
+            gym.compact(keep)
+            arms.compact(keep)
+    assert all(n > 0 for n in counts.values()), counts
+
+
+def test_which_envs_get_a_batched_stepper(sizes):
     assert isinstance(batched_stepper(ID, 2, sizes), MountainCarStepper)
-    assert batched_stepper("gymnasium:Acrobot-v1", 2, sizes) is None
+    acrobot = read_specs(make_env(ACROBOT))
+    assert isinstance(batched_stepper(ACROBOT, 2, acrobot), AcrobotStepper)
+    assert batched_stepper("gymnasium:CartPole-v1", 2, sizes) is None
     assert batched_stepper("gymnasium:my_module:MountainCar-v0", 2, sizes) is None
+
+
+def test_acrobot_trainer_run_is_the_gym_run_and_resumes(tmp_path):
+    config = TrainConfig(agent="flat", env=ACROBOT, runs=3, episodes=3, seed=3,
+                         checkpoint_every=2)  # fmt: skip
+    batched = PopulationTrainer(config)
+    assert isinstance(batched.stepper, AcrobotStepper)
+    batched.train()
+    gym = PopulationTrainer(config, batched_envs=False).train()
+    assert np.array_equal(batched.returns, gym.returns)
+    assert np.array_equal(batched.lengths, gym.lengths)
+    interrupted = PopulationTrainer(config, out_dir=tmp_path)
+    interrupted.register_op("post_checkpoint", InterruptAt())
+    with pytest.raises(KeyboardInterrupt):
+        interrupted.train()
+    resumed = PopulationTrainer(config, out_dir=tmp_path)
+    load_checkpoint(latest_checkpoint(tmp_path), resumed)
+    resumed.train()
+    assert np.array_equal(resumed.returns, batched.returns)
 
 
 def test_the_trainer_picks_it_and_gets_the_gym_run_bit_for_bit():
