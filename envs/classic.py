@@ -43,24 +43,28 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["MountainCarStepper", "AcrobotStepper", "batched_stepper", "BATCHED_IDS"]
+__all__ = ["BatchedClassicEnv", "MountainCarStepper", "AcrobotStepper", "batched_stepper",
+           "BATCHED_IDS"]
 
 
-class MountainCarStepper:
-    """P MountainCar-v0 envs stepped as one batch (the ``EnvStepper`` protocol).
+class BatchedClassicEnv:
+    """What the batched classic-control steppers share (the ``EnvStepper`` protocol): P envs,
+    agent p's starts drawn from its own ``np_random(seed + p)``, the active rows, each env's
+    step count and Gymnasium's time limit. A subclass names its ``KIND``, its state arrays
+    (``STATE``: attributes of ``[P, ...]`` float64), its ``TIME_LIMIT``, and writes
+    :meth:`_start_state` (one agent's reset draw), :meth:`_obs` and :meth:`step`.
 
     Args:
-        population: P, one car per agent.
+        population: P, one env per agent.
         sizes: the env's :class:`~skillchain_torch.envs.external.EnvSizes` (from its specs).
-        seed: agent p's car draws its starts from ``np_random(seed + p)``.
-        max_episode_steps: truncate after this many steps as well (``None``: Gymnasium's 200
-            alone).
+        seed: agent p's env draws its starts from ``np_random(seed + p)``.
+        max_episode_steps: truncate after this many steps as well (``None``: Gymnasium's
+            limit alone).
     """
 
-    # gymnasium.envs.classic_control.MountainCarEnv's constants
-    MIN_POSITION, MAX_POSITION, MAX_SPEED = -1.2, 0.6, 0.07
-    GOAL_POSITION, GOAL_VELOCITY, FORCE, GRAVITY = 0.5, 0.0, 0.001, 0.0025
-    TIME_LIMIT = 200  # MountainCar-v0's TimeLimit
+    KIND: str
+    STATE: tuple[str, ...]
+    TIME_LIMIT: int
 
     def __init__(self, population: int, sizes, seed: int = 0,
                  max_episode_steps: int | None = None):  # fmt: skip
@@ -70,32 +74,107 @@ class MountainCarStepper:
         self.max_episode_steps = max_episode_steps
         self.rngs = [np_random(int(seed) + p)[0] for p in range(self.population)]
         for rng in self.rngs:  # GymEnv.set_seed resets once with the seed: that draw is spent
-            rng.uniform(low=-0.6, high=-0.4)
-        self.position = np.zeros(self.population, dtype=np.float64)
-        self.velocity = np.zeros(self.population, dtype=np.float64)
+            self._start_state(rng)
         self._count = np.zeros(self.population, dtype=np.int64)
         self.index = torch.arange(self.population)
+
+    def _start_state(self, rng) -> np.ndarray:
+        """One env's start state, drawn from its generator as Gymnasium's ``reset``."""
+        raise NotImplementedError
+
+    def _obs(self, rows: np.ndarray) -> Tensor:
+        raise NotImplementedError
 
     @property
     def num_active(self) -> int:
         return int(self.index.numel())
 
-    def _obs(self, rows: np.ndarray) -> Tensor:
-        state = np.stack([self.position[rows], self.velocity[rows]], axis=1).astype(np.float32)
-        return self.sizes.scale(torch.from_numpy(state))
+    @property
+    def limit(self) -> int:
+        """Steps after which an episode is truncated."""
+        if self.max_episode_steps is None:
+            return self.TIME_LIMIT
+        return min(self.TIME_LIMIT, self.max_episode_steps)
 
     def _reset_rows(self, rows: np.ndarray) -> None:
-        for p in rows.tolist():  # each car from its own generator, as MountainCarEnv.reset
-            self.position[p] = self.rngs[p].uniform(low=-0.6, high=-0.4)
-            self.velocity[p] = 0.0
+        for p in rows.tolist():  # each env from its own generator
+            self._set_row(p, self._start_state(self.rngs[p]))
             self._count[p] = 0
 
+    def _set_row(self, p: int, start: np.ndarray) -> None:
+        raise NotImplementedError
+
     def start(self) -> Tensor:
-        """Reset every car; all active; observations ``[P, 2]`` in the unit box."""
+        """Reset every env; all active; observations ``[P, D]`` mapped by the specs."""
         self.index = torch.arange(self.population)
         rows = np.arange(self.population)
         self._reset_rows(rows)
         return self._obs(rows)
+
+    def reset(self, rows: Tensor) -> Tensor:
+        """Restart the envs of compact ``rows``; their observations ``[len(rows), D]``."""
+        envs = self.index[rows].numpy()
+        self._reset_rows(envs)
+        return self._obs(envs)
+
+    def compact(self, keep: Tensor) -> None:
+        """Keep only the rows where ``keep`` (bool ``[n]``); the others stop stepping."""
+        self.index = self.index[keep.nonzero().flatten()]
+
+    def sync(self) -> None:
+        """Nothing to write back: the envs' state is this object's."""
+
+    def _ends(self, rows: np.ndarray, terminated: np.ndarray, obs: Tensor, reward: Tensor):
+        """The step's return: count the step, truncate at the limit (not where terminated)."""
+        self._count[rows] += 1
+        truncated = (self._count[rows] >= self.limit) & ~terminated
+        if not (terminated.any() or truncated.any()):
+            return obs, reward, None
+        return obs, reward, (torch.from_numpy(terminated), torch.from_numpy(truncated))
+
+    def state_dict(self) -> dict:
+        return {"kind": self.KIND, "index": self.index.clone(),
+                **{name: torch.from_numpy(getattr(self, name).copy()) for name in self.STATE},
+                "step_count": torch.from_numpy(self._count.copy()),
+                "rngs": [rng.bit_generator.state for rng in self.rngs]}  # fmt: skip
+
+    def load_state_dict(self, state: dict) -> None:
+        if state.get("kind") != self.KIND or len(state["rngs"]) != self.population:
+            raise ValueError(f"the saved env state is not of {self.population} batched "
+                             f"{self.KIND} envs (kind {state.get('kind')!r})")  # fmt: skip
+        self.index = state["index"].clone()
+        for name in self.STATE:
+            setattr(self, name, state[name].numpy().copy())
+        self._count = state["step_count"].numpy().copy()
+        for rng, saved in zip(self.rngs, state["rngs"]):
+            rng.bit_generator.state = saved
+
+
+class MountainCarStepper(BatchedClassicEnv):
+    """P MountainCar-v0 envs stepped as one batch (the ``EnvStepper`` protocol); the arguments
+    are :class:`BatchedClassicEnv`'s (Gymnasium's limit: 200 steps)."""
+
+    # gymnasium.envs.classic_control.MountainCarEnv's constants
+    MIN_POSITION, MAX_POSITION, MAX_SPEED = -1.2, 0.6, 0.07
+    GOAL_POSITION, GOAL_VELOCITY, FORCE, GRAVITY = 0.5, 0.0, 0.001, 0.0025
+    TIME_LIMIT = 200  # MountainCar-v0's TimeLimit
+    KIND, STATE = "mountain-car", ("position", "velocity")
+
+    def __init__(self, population: int, sizes, seed: int = 0,
+                 max_episode_steps: int | None = None):  # fmt: skip
+        super().__init__(population, sizes, seed, max_episode_steps)
+        self.position = np.zeros(self.population, dtype=np.float64)
+        self.velocity = np.zeros(self.population, dtype=np.float64)
+
+    def _start_state(self, rng) -> np.ndarray:
+        return np.array([rng.uniform(low=-0.6, high=-0.4), 0.0])
+
+    def _set_row(self, p: int, start: np.ndarray) -> None:
+        self.position[p], self.velocity[p] = start
+
+    def _obs(self, rows: np.ndarray) -> Tensor:
+        state = np.stack([self.position[rows], self.velocity[rows]], axis=1).astype(np.float32)
+        return self.sizes.scale(torch.from_numpy(state))
 
     def step(self, action: Tensor):
         """Step the active rows: ``(observation [n, 2], reward [n], ends)``; ``ends`` is
@@ -109,61 +188,18 @@ class MountainCarStepper:
         x = np.clip(x + v, self.MIN_POSITION, self.MAX_POSITION)
         v = np.where((x == self.MIN_POSITION) & (v < 0), 0.0, v)
         self.position[rows], self.velocity[rows] = x, v
-        self._count[rows] += 1
         terminated = (x >= self.GOAL_POSITION) & (v >= self.GOAL_VELOCITY)
-        limit = self.TIME_LIMIT if self.max_episode_steps is None else min(
-            self.TIME_LIMIT, self.max_episode_steps)
-        truncated = (self._count[rows] >= limit) & ~terminated
-        obs = self._obs(rows)
         reward = torch.full((rows.size,), -1.0, dtype=torch.float64)
-        if not (terminated.any() or truncated.any()):
-            return obs, reward, None
-        return obs, reward, (torch.from_numpy(terminated), torch.from_numpy(truncated))
-
-    def reset(self, rows: Tensor) -> Tensor:
-        """Restart the cars of compact ``rows``; their observations ``[len(rows), 2]``."""
-        cars = self.index[rows].numpy()
-        self._reset_rows(cars)
-        return self._obs(cars)
-
-    def compact(self, keep: Tensor) -> None:
-        """Keep only the rows where ``keep`` (bool ``[n]``); the others stop stepping."""
-        self.index = self.index[keep.nonzero().flatten()]
-
-    def sync(self) -> None:
-        """Nothing to write back: the cars' state is this object's."""
-
-    def state_dict(self) -> dict:
-        return {"kind": "mountain-car", "index": self.index.clone(),
-                "position": torch.from_numpy(self.position.copy()),
-                "velocity": torch.from_numpy(self.velocity.copy()),
-                "step_count": torch.from_numpy(self._count.copy()),
-                "rngs": [rng.bit_generator.state for rng in self.rngs]}  # fmt: skip
-
-    def load_state_dict(self, state: dict) -> None:
-        if state.get("kind") != "mountain-car" or len(state["rngs"]) != self.population:
-            raise ValueError(f"the saved env state is not of {self.population} batched "
-                             f"MountainCar envs (kind {state.get('kind')!r})")  # fmt: skip
-        self.index = state["index"].clone()
-        self.position = state["position"].numpy().copy()
-        self.velocity = state["velocity"].numpy().copy()
-        self._count = state["step_count"].numpy().copy()
-        for rng, saved in zip(self.rngs, state["rngs"]):
-            rng.bit_generator.state = saved
+        return self._ends(rows, terminated, self._obs(rows), reward)
 
 
-class AcrobotStepper:
+class AcrobotStepper(BatchedClassicEnv):
     """P Acrobot-v1 envs stepped as one batch (the ``EnvStepper`` protocol), with Gymnasium's
     ``AcrobotEnv.step`` arithmetic ("book" dynamics, one RK4 step of 0.2 s) vectorised over the
     agents: the same observations, rewards and ends bit for bit, checked against one ``GymEnv``
     per agent in ``tests/envs/test_classic.py``.
 
-    Args:
-        population: P, one acrobot per agent.
-        sizes: the env's :class:`~skillchain_torch.envs.external.EnvSizes` (from its specs).
-        seed: agent p's acrobot draws its starts from ``np_random(seed + p)``.
-        max_episode_steps: truncate after this many steps as well (``None``: Gymnasium's 500
-            alone).
+    The arguments are :class:`BatchedClassicEnv`'s (Gymnasium's limit: 500 steps).
 
     Example:
         >>> from skillchain_torch.envs.external import make_env, read_specs
@@ -183,41 +219,25 @@ class AcrobotStepper:
     AVAIL_TORQUE = np.array([-1.0, 0.0, 1.0])
     TIME_LIMIT = 500  # Acrobot-v1's TimeLimit
 
+    KIND, STATE = "acrobot", ("state",)
+
     def __init__(self, population: int, sizes, seed: int = 0,
                  max_episode_steps: int | None = None):  # fmt: skip
-        from gymnasium.utils.seeding import np_random
-
-        self.population, self.sizes = int(population), sizes
-        self.max_episode_steps = max_episode_steps
-        self.rngs = [np_random(int(seed) + p)[0] for p in range(self.population)]
-        for rng in self.rngs:  # GymEnv.set_seed resets once with the seed: that draw is spent
-            rng.uniform(low=-0.1, high=0.1, size=(4,))
+        super().__init__(population, sizes, seed, max_episode_steps)
         self.state = np.zeros((self.population, 4), dtype=np.float64)
-        self._count = np.zeros(self.population, dtype=np.int64)
-        self.index = torch.arange(self.population)
 
-    @property
-    def num_active(self) -> int:
-        return int(self.index.numel())
+    def _start_state(self, rng) -> np.ndarray:
+        # AcrobotEnv.reset: uniform in [-0.1, 0.1]^4, as float32
+        return rng.uniform(low=-0.1, high=0.1, size=(4,)).astype(np.float32)
+
+    def _set_row(self, p: int, start: np.ndarray) -> None:
+        self.state[p] = start
 
     def _obs(self, rows: np.ndarray) -> Tensor:
         s = self.state[rows]
         obs = np.stack([np.cos(s[:, 0]), np.sin(s[:, 0]), np.cos(s[:, 1]), np.sin(s[:, 1]),
                         s[:, 2], s[:, 3]], axis=1).astype(np.float32)  # fmt: skip
         return self.sizes.scale(torch.from_numpy(obs))
-
-    def _reset_rows(self, rows: np.ndarray) -> None:
-        for p in rows.tolist():  # each from its own generator, as AcrobotEnv.reset (float32)
-            start = self.rngs[p].uniform(low=-0.1, high=0.1, size=(4,)).astype(np.float32)
-            self.state[p] = start
-            self._count[p] = 0
-
-    def start(self) -> Tensor:
-        """Reset every acrobot; all active; observations ``[P, 6]``, mapped by the specs."""
-        self.index = torch.arange(self.population)
-        rows = np.arange(self.population)
-        self._reset_rows(rows)
-        return self._obs(rows)
 
     def _dsdt(self, y: np.ndarray) -> np.ndarray:
         """``AcrobotEnv._dsdt`` ("book") for rows ``y [n, 5]`` (the state and the torque),
@@ -265,45 +285,9 @@ class AcrobotStepper:
         ns[:, 2] = np.minimum(np.maximum(ns[:, 2], -self.MAX_VEL_1), self.MAX_VEL_1)
         ns[:, 3] = np.minimum(np.maximum(ns[:, 3], -self.MAX_VEL_2), self.MAX_VEL_2)
         self.state[rows] = ns
-        self._count[rows] += 1
         terminated = -np.cos(ns[:, 0]) - np.cos(ns[:, 1] + ns[:, 0]) > 1.0
-        limit = self.TIME_LIMIT if self.max_episode_steps is None else min(
-            self.TIME_LIMIT, self.max_episode_steps)
-        truncated = (self._count[rows] >= limit) & ~terminated
-        obs = self._obs(rows)
         reward = torch.from_numpy(np.where(terminated, 0.0, -1.0))
-        if not (terminated.any() or truncated.any()):
-            return obs, reward, None
-        return obs, reward, (torch.from_numpy(terminated), torch.from_numpy(truncated))
-
-    def reset(self, rows: Tensor) -> Tensor:
-        """Restart the acrobots of compact ``rows``; their observations ``[len(rows), 6]``."""
-        arms = self.index[rows].numpy()
-        self._reset_rows(arms)
-        return self._obs(arms)
-
-    def compact(self, keep: Tensor) -> None:
-        """Keep only the rows where ``keep`` (bool ``[n]``); the others stop stepping."""
-        self.index = self.index[keep.nonzero().flatten()]
-
-    def sync(self) -> None:
-        """Nothing to write back: the acrobots' state is this object's."""
-
-    def state_dict(self) -> dict:
-        return {"kind": "acrobot", "index": self.index.clone(),
-                "state": torch.from_numpy(self.state.copy()),
-                "step_count": torch.from_numpy(self._count.copy()),
-                "rngs": [rng.bit_generator.state for rng in self.rngs]}  # fmt: skip
-
-    def load_state_dict(self, state: dict) -> None:
-        if state.get("kind") != "acrobot" or len(state["rngs"]) != self.population:
-            raise ValueError(f"the saved env state is not of {self.population} batched "
-                             f"Acrobot envs (kind {state.get('kind')!r})")  # fmt: skip
-        self.index = state["index"].clone()
-        self.state = state["state"].numpy().copy()
-        self._count = state["step_count"].numpy().copy()
-        for rng, saved in zip(self.rngs, state["rngs"]):
-            rng.bit_generator.state = saved
+        return self._ends(rows, terminated, self._obs(rows), reward)
 
 
 BATCHED = {"MountainCar-v0": MountainCarStepper, "Acrobot-v1": AcrobotStepper}

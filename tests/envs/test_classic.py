@@ -31,6 +31,39 @@ def sizes():
     return read_specs(make_env(ID))
 
 
+def same_as_gym(env_id, kind, policy, extra, steps, max_episode_steps, P=6, seed=11):
+    """Step ``kind`` and one ``GymEnv`` per agent together with ``policy(stepper, generator)``
+    for ``steps`` steps (half the agents retire at 5/6 of them): every observation, reward,
+    end and restart is the same. Returns how often the episodes terminated, were truncated,
+    and ``extra(stepper, before)`` counted (a branch of the step: the car at the wall, an
+    angle wrapped)."""
+    sizes = read_specs(make_env(env_id))
+    gym = EnvStepper([make_env(env_id) for _ in range(P)], sizes, seed=seed,
+                     max_episode_steps=max_episode_steps)  # fmt: skip
+    batched = kind(P, sizes, seed=seed, max_episode_steps=max_episode_steps)
+    assert torch.equal(gym.start(), batched.start())
+    generator = torch.Generator().manual_seed(0)
+    counts = {"terminated": 0, "truncated": 0, "branch": 0}
+    for step in range(steps):
+        action = policy(batched, generator)
+        before = batched.state_dict()
+        a, b = gym.step(action), batched.step(action)
+        assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1]), step
+        assert (a[2] is None) == (b[2] is None), step
+        counts["branch"] += extra(batched, before)
+        if a[2] is not None:
+            assert torch.equal(a[2][0], b[2][0]) and torch.equal(a[2][1], b[2][1]), step
+            counts["terminated"] += int(a[2][0].sum())
+            counts["truncated"] += int(a[2][1].sum())
+            rows = (a[2][0] | a[2][1]).nonzero().flatten()
+            assert torch.equal(gym.reset(rows), batched.reset(rows)), step
+        if step == steps * 5 // 6:  # some agents finish: both steppers drop the same rows
+            keep = torch.arange(gym.num_active) % 2 == 0
+            gym.compact(keep)
+            batched.compact(keep)
+    return counts
+
+
 def pumping(cars: MountainCarStepper, generator) -> torch.Tensor:
     """Push along the velocity (reaches the flag), with some random actions (hits the wall)."""
     v = torch.from_numpy(cars.velocity[cars.index.numpy()])
@@ -39,71 +72,38 @@ def pumping(cars: MountainCarStepper, generator) -> torch.Tensor:
     return torch.where(torch.rand(push.shape, generator=generator) < 0.3, random, push)
 
 
+def at_the_wall(cars: MountainCarStepper, before) -> int:
+    return int((cars.position == cars.MIN_POSITION).sum())
+
+
 @pytest.mark.parametrize("max_episode_steps", [None, 150])
-def test_step_for_step_the_same_as_one_gym_env_per_agent(sizes, max_episode_steps):
-    P, seed = 6, 11
-    gym = EnvStepper([make_env(ID) for _ in range(P)], sizes, seed=seed,
-                     max_episode_steps=max_episode_steps)  # fmt: skip
-    cars = MountainCarStepper(P, sizes, seed=seed, max_episode_steps=max_episode_steps)
-    assert torch.equal(gym.start(), cars.start())
-    generator = torch.Generator().manual_seed(0)
-    counts = {"terminated": 0, "truncated": 0, "wall": 0}
-    for step in range(2500):
-        action = pumping(cars, generator)
-        a, b = gym.step(action), cars.step(action)
-        assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1]), step
-        assert (a[2] is None) == (b[2] is None), step
-        counts["wall"] += int((cars.position == cars.MIN_POSITION).sum())
-        if a[2] is not None:
-            assert torch.equal(a[2][0], b[2][0]) and torch.equal(a[2][1], b[2][1]), step
-            counts["terminated"] += int(a[2][0].sum())
-            counts["truncated"] += int(a[2][1].sum())
-            rows = (a[2][0] | a[2][1]).nonzero().flatten()
-            assert torch.equal(gym.reset(rows), cars.reset(rows)), step
-        if step == 2000:  # some agents finish: both steppers drop the same rows
-            keep = torch.arange(gym.num_active) % 2 == 0
-            gym.compact(keep)
-            cars.compact(keep)
+def test_step_for_step_the_same_as_one_gym_env_per_agent(max_episode_steps):
+    counts = same_as_gym(ID, MountainCarStepper, pumping, at_the_wall, 2400, max_episode_steps)
     assert all(n > 0 for n in counts.values()), counts  # every branch of the step was taken
 
 
 ACROBOT = "gymnasium:Acrobot-v1"
 
 
+def swinging(arms: AcrobotStepper, generator) -> torch.Tensor:
+    """The torque along the second joint's velocity (reaches the line), with some random
+    actions; agents 0 and 3 act at random only (they run into the time limit)."""
+    push = torch.where(torch.from_numpy(arms.state[arms.index.numpy(), 3]) >= 0, 2, 0)
+    random = torch.randint(0, 3, push.shape, generator=generator)
+    share = torch.where(arms.index % 3 == 0, 1.0, 0.3)
+    return torch.where(torch.rand(push.shape, generator=generator) < share, random, push)
+
+
+def wrapped(arms: AcrobotStepper, before) -> int:
+    """Angles that crossed +-pi this step (wrapped into [-pi, pi])."""
+    rows = arms.index.numpy()
+    jump = np.abs(arms.state[rows, :2] - before["state"].numpy()[rows, :2])
+    return int((jump > np.pi).sum())
+
+
 @pytest.mark.parametrize("max_episode_steps", [None, 300])
 def test_acrobot_step_for_step_the_same_as_one_gym_env_per_agent(max_episode_steps):
-    """Energy pumping (the torque along the second joint's velocity, with some random
-    actions) reaches the line, random actions run into the time limit (agents 0 and 3); every
-    observation, reward, end and restart is Gymnasium's, bit for bit."""
-    sizes = read_specs(make_env(ACROBOT))
-    P, seed = 5, 11
-    gym = EnvStepper([make_env(ACROBOT) for _ in range(P)], sizes, seed=seed,
-                     max_episode_steps=max_episode_steps)  # fmt: skip
-    arms = AcrobotStepper(P, sizes, seed=seed, max_episode_steps=max_episode_steps)
-    assert torch.equal(gym.start(), arms.start())
-    generator = torch.Generator().manual_seed(0)
-    counts = {"terminated": 0, "truncated": 0, "wrapped": 0}
-    for step in range(3000):
-        push = torch.where(torch.from_numpy(arms.state[arms.index.numpy(), 3]) >= 0, 2, 0)
-        random = torch.randint(0, 3, push.shape, generator=generator)
-        share = torch.where(arms.index % 3 == 0, 1.0, 0.3)  # agents 0 and 3 act at random
-        action = torch.where(torch.rand(push.shape, generator=generator) < share, random, push)
-        before = arms.state[arms.index.numpy(), :2].copy()
-        a, b = gym.step(action), arms.step(action)
-        assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1]), step
-        assert (a[2] is None) == (b[2] is None), step
-        after = arms.state[arms.index.numpy(), :2]
-        counts["wrapped"] += int((np.abs(after - before) > np.pi).sum())
-        if a[2] is not None:
-            assert torch.equal(a[2][0], b[2][0]) and torch.equal(a[2][1], b[2][1]), step
-            counts["terminated"] += int(a[2][0].sum())
-            counts["truncated"] += int(a[2][1].sum())
-            rows = (a[2][0] | a[2][1]).nonzero().flatten()
-            assert torch.equal(gym.reset(rows), arms.reset(rows)), step
-        if step == 2500:
-            keep = torch.arange(gym.num_active) % 2 == 0
-            gym.compact(keep)
-            arms.compact(keep)
+    counts = same_as_gym(ACROBOT, AcrobotStepper, swinging, wrapped, 3000, max_episode_steps)
     assert all(n > 0 for n in counts.values()), counts
 
 
