@@ -22,8 +22,9 @@ on it resumes from a checkpoint, which the ``GymEnv`` stepper cannot.
 action, Gymnasium's wrap and bounds, its 500-step limit); its squares go through ``pow`` as
 Gymnasium's NumPy scalars do (see :meth:`AcrobotStepper._dsdt`).
 
-:func:`batched_stepper` is the one place that picks them: for ``gymnasium:MountainCar-v0`` and
-``gymnasium:Acrobot-v1`` it returns theirs, for any other env ``None`` (the general stepper).
+:func:`batched_stepper` is the one place that picks them: for ``gymnasium:MountainCar-v0``,
+``gymnasium:Acrobot-v1`` and ``gymnasium:CartPole-v1`` (:class:`CartPoleStepper`, Euler)
+it returns theirs, for any other env ``None`` (the general stepper).
 
 Example:
     >>> from skillchain_torch.envs.external import make_env, read_specs
@@ -39,12 +40,14 @@ Example:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 from torch import Tensor
 
 __all__ = ["BatchedClassicEnv", "MountainCarStepper", "AcrobotStepper", "batched_stepper",
-           "BATCHED_IDS"]
+           "CartPoleStepper", "BATCHED_IDS"]
 
 
 class BatchedClassicEnv:
@@ -290,15 +293,78 @@ class AcrobotStepper(BatchedClassicEnv):
         return self._ends(rows, terminated, self._obs(rows), reward)
 
 
-BATCHED = {"MountainCar-v0": MountainCarStepper, "Acrobot-v1": AcrobotStepper}
+class CartPoleStepper(BatchedClassicEnv):
+    """P CartPole-v1 envs stepped as one batch (the ``EnvStepper`` protocol), with Gymnasium's
+    ``CartPoleEnv.step`` arithmetic (Euler) vectorised over the agents; the arguments are
+    :class:`BatchedClassicEnv`'s (Gymnasium's limit: 500 steps). The reward is 1 every step,
+    the step the pole falls included, as Gymnasium's.
+
+    Example:
+        >>> from skillchain_torch.envs.external import make_env, read_specs
+        >>> bounds = "-2.4:2.4,-3:3,-0.21:0.21,-3:3"  # (its velocities are unbounded)
+        >>> sizes = read_specs(make_env("gymnasium:CartPole-v1"), obs_bounds=bounds)
+        >>> carts = CartPoleStepper(2, sizes, seed=0)
+        >>> carts.start().shape
+        torch.Size([2, 4])
+        >>> obs, reward, ends = carts.step(torch.tensor([0, 1]))
+        >>> reward.tolist(), ends
+        ([1.0, 1.0], None)
+    """
+
+    # gymnasium.envs.classic_control.CartPoleEnv's constants
+    GRAVITY, MASSCART, MASSPOLE, LENGTH, FORCE_MAG, TAU = 9.8, 1.0, 0.1, 0.5, 10.0, 0.02
+    TOTAL_MASS = MASSPOLE + MASSCART
+    POLEMASS_LENGTH = MASSPOLE * LENGTH
+    THETA_THRESHOLD = 12 * 2 * math.pi / 360
+    X_THRESHOLD = 2.4
+    TIME_LIMIT = 500  # CartPole-v1's TimeLimit
+    KIND, STATE = "cart-pole", ("state",)
+
+    def __init__(self, population: int, sizes, seed: int = 0,
+                 max_episode_steps: int | None = None):  # fmt: skip
+        super().__init__(population, sizes, seed, max_episode_steps)
+        self.state = np.zeros((self.population, 4), dtype=np.float64)
+
+    def _start_state(self, rng) -> np.ndarray:
+        return rng.uniform(low=-0.05, high=0.05, size=(4,))  # CartPoleEnv.reset
+
+    def _set_row(self, p: int, start: np.ndarray) -> None:
+        self.state[p] = start
+
+    def _obs(self, rows: np.ndarray) -> Tensor:
+        return self.sizes.scale(torch.from_numpy(self.state[rows].astype(np.float32)))
+
+    def step(self, action: Tensor):
+        """Step the active rows: ``(observation [n, 4], reward [n], ends)``; ``ends`` is
+        ``None`` when no episode ended, else ``(terminated, truncated)`` bool ``[n]``."""
+        rows = self.index.numpy()
+        a = action.detach().to("cpu", torch.int64).numpy()
+        x, x_dot, theta, theta_dot = self.state[rows].T
+        force = np.where(a == 1, self.FORCE_MAG, -self.FORCE_MAG)
+        costheta, sintheta = np.cos(theta), np.sin(theta)
+        temp = (force + self.POLEMASS_LENGTH * np.square(theta_dot) * sintheta) / self.TOTAL_MASS
+        thetaacc = (self.GRAVITY * sintheta - costheta * temp) / (
+            self.LENGTH * (4.0 / 3.0 - self.MASSPOLE * np.square(costheta) / self.TOTAL_MASS))
+        xacc = temp - self.POLEMASS_LENGTH * thetaacc * costheta / self.TOTAL_MASS
+        x, x_dot = x + self.TAU * x_dot, x_dot + self.TAU * xacc  # Euler, Gymnasium's order
+        theta, theta_dot = theta + self.TAU * theta_dot, theta_dot + self.TAU * thetaacc
+        self.state[rows] = np.stack([x, x_dot, theta, theta_dot], axis=1)
+        terminated = ((x < -self.X_THRESHOLD) | (x > self.X_THRESHOLD)
+                      | (theta < -self.THETA_THRESHOLD) | (theta > self.THETA_THRESHOLD))
+        reward = torch.ones(rows.size, dtype=torch.float64)
+        return self._ends(rows, terminated, self._obs(rows), reward)
+
+
+BATCHED = {"MountainCar-v0": MountainCarStepper, "Acrobot-v1": AcrobotStepper,
+           "CartPole-v1": CartPoleStepper}
 BATCHED_IDS = tuple(BATCHED)
 
 
 def batched_stepper(env: str, population: int, sizes, seed: int = 0,
                     max_episode_steps: int | None = None):  # fmt: skip
     """The batched stepper of ``env`` (``"gymnasium:MountainCar-v0"``,
-    ``"gymnasium:Acrobot-v1"``), or ``None`` where there is none (the trainer then steps one
-    ``GymEnv`` per agent)."""
+    ``"gymnasium:Acrobot-v1"``, ``"gymnasium:CartPole-v1"``), or ``None`` where there is none
+    (the trainer then steps one ``GymEnv`` per agent)."""
     kind = BATCHED.get(env.rpartition(":")[2])
     if kind is None or env.count(":") != 1:
         return None  # (a MODULE:ID env is the user's own, whatever its name)

@@ -12,7 +12,12 @@ import pytest
 import torch
 
 from skillchain_torch.envs import classic
-from skillchain_torch.envs.classic import AcrobotStepper, MountainCarStepper, batched_stepper
+from skillchain_torch.envs.classic import (
+    AcrobotStepper,
+    CartPoleStepper,
+    MountainCarStepper,
+    batched_stepper,
+)
 from skillchain_torch.envs.external import make_env, read_specs
 from skillchain_torch.trainers import TrainConfig
 from skillchain_torch.trainers.loop.env_stepper import EnvStepper
@@ -31,13 +36,14 @@ def sizes():
     return read_specs(make_env(ID))
 
 
-def same_as_gym(env_id, kind, policy, extra, steps, max_episode_steps, P=6, seed=11):
+def same_as_gym(env_id, kind, policy, extra, steps, max_episode_steps, P=6, seed=11,
+                sizes=None):
     """Step ``kind`` and one ``GymEnv`` per agent together with ``policy(stepper, generator)``
     for ``steps`` steps (half the agents retire at 5/6 of them): every observation, reward,
     end and restart is the same. Returns how often the episodes terminated, were truncated,
     and ``extra(stepper, before)`` counted (a branch of the step: the car at the wall, an
     angle wrapped)."""
-    sizes = read_specs(make_env(env_id))
+    sizes = read_specs(make_env(env_id)) if sizes is None else sizes
     gym = EnvStepper([make_env(env_id) for _ in range(P)], sizes, seed=seed,
                      max_episode_steps=max_episode_steps)  # fmt: skip
     batched = kind(P, sizes, seed=seed, max_episode_steps=max_episode_steps)
@@ -107,11 +113,38 @@ def test_acrobot_step_for_step_the_same_as_one_gym_env_per_agent(max_episode_ste
     assert all(n > 0 for n in counts.values()), counts
 
 
+CARTPOLE = "gymnasium:CartPole-v1"
+CART_BOUNDS = "-2.4:2.4,-3:3,-0.21:0.21,-3:3"
+
+
+def balancing(carts: CartPoleStepper, generator) -> torch.Tensor:
+    """Push towards the pole's lean and fall (it stays up until the time limit), with random
+    actions (it falls); agents 0 and 3 act at random only."""
+    s = carts.state[carts.index.numpy()]
+    push = torch.from_numpy((s[:, 2] + 0.5 * s[:, 3] > 0).astype(np.int64))
+    random = torch.randint(0, 2, push.shape, generator=generator)
+    share = torch.where(carts.index % 3 == 0, 1.0, 0.05)
+    return torch.where(torch.rand(push.shape, generator=generator) < share, random, push)
+
+
+def leaning(carts: CartPoleStepper, before) -> int:
+    """Poles that lean further than 0.1 rad (the angle branch of the step, before a fall)."""
+    return int((np.abs(carts.state[carts.index.numpy(), 2]) > 0.1).sum())
+
+
+@pytest.mark.parametrize("max_episode_steps", [None, 200])
+def test_cartpole_step_for_step_the_same_as_one_gym_env_per_agent(max_episode_steps):
+    sizes = read_specs(make_env(CARTPOLE), obs_bounds=CART_BOUNDS)
+    counts = same_as_gym(CARTPOLE, CartPoleStepper, balancing, leaning, 3000,
+                         max_episode_steps, sizes=sizes)  # fmt: skip
+    assert all(n > 0 for n in counts.values()), counts
+
+
 def test_which_envs_get_a_batched_stepper(sizes):
     assert isinstance(batched_stepper(ID, 2, sizes), MountainCarStepper)
     acrobot = read_specs(make_env(ACROBOT))
     assert isinstance(batched_stepper(ACROBOT, 2, acrobot), AcrobotStepper)
-    assert batched_stepper("gymnasium:CartPole-v1", 2, sizes) is None
+    assert batched_stepper("gymnasium:LunarLander-v3", 2, sizes) is None
     assert batched_stepper("gymnasium:my_module:MountainCar-v0", 2, sizes) is None
 
 

@@ -59,10 +59,11 @@ _SECTIONS = {
 
 
 # The env section of the steppers other than Pinball's: EnvStepper (a Gymnasium/TorchRL env's
-# counters only) and the batched MountainCar and Acrobot (envs/classic.py: their whole state).
+# counters only) and the batched classic-control envs (envs/classic.py: their whole state).
 _ENV_KINDS = {"torchrl-envs": ("index", "step_count"),
               "mountain-car": ("index", "step_count", "position", "velocity", "rngs"),
-              "acrobot": ("index", "step_count", "state", "rngs")}
+              "acrobot": ("index", "step_count", "state", "rngs"),
+              "cart-pole": ("index", "step_count", "state", "rngs")}
 
 
 class DamagedCheckpoint(ValueError):
