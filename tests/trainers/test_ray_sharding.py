@@ -221,3 +221,28 @@ def test_default_blocks_are_one_per_worker_and_shrink_is_guided():
     assert plan_blocks(7, 3) == [(0, 3), (3, 6), (6, 7)]
     assert plan_blocks(10, 2, "shrink") == guided_spans(10, 2)
     assert plan_blocks(10, 2, 4) == [(0, 4), (4, 8), (8, 10)]
+
+
+def test_resume_with_more_episodes_extends_a_sharded_run(ray_local, tmp_path):
+    """--resume RUN_DIR --episodes N on a sharded run: every block continues from its newest
+    checkpoint before an agent finished (the later ones and block.json set aside), and the
+    merged run is the one-process run of N episodes, bit for bit; interrupted once extended,
+    it resumes from the extension's own checkpoints."""
+    fields = dict(agent="flat", checkpoint_every=1, **TINY)
+    out = tmp_path / "run"
+    assert main(["train", *_flags(**fields), "--out", str(out), "--workers", "2",
+                 "--block-size", "2", "--quiet"]) == 0
+    assert main(["train", "--resume", str(out), "--episodes", "5", "--quiet"]) == 0
+    longer = dict(fields, episodes=5)
+    _same(out, _one_process(**longer))
+    assert TrainConfig.load_json(out / "config.json").episodes == 5
+    block = out / "blocks" / "0-2"
+    assert TrainConfig.load_json(block / "config.json").episodes == 5
+    assert (block / "checkpoints" / "superseded" / "block.json").is_file()
+    # Interrupted after the extension: the block resumes from the extension's checkpoints.
+    for name in ("block.json", "returns.npy", "lengths.npy"):
+        (block / name).unlink()
+    for path in sorted((block / "checkpoints").glob("ckpt_*.pt"))[-2:]:
+        path.unlink()
+    assert main(["train", "--resume", str(out), "--quiet"]) == 0
+    _same(out, _one_process(**longer))

@@ -327,9 +327,16 @@ def _train(parser, args) -> int:
         if extend and args.episodes < config.episodes:
             parser.error(f"--episodes {args.episodes} is fewer than the {config.episodes} of "
                          f"{out}: a run can be extended, not shortened")  # fmt: skip
-        if extend and (sharded or (out / "sharding.json").is_file()):
-            parser.error(f"--resume {out} --episodes: a sharded run cannot be extended yet")
         if sharded or (out / "sharding.json").is_file():
+            if extend:  # every block from its newest checkpoint before an agent finished
+                from skillchain_torch.trainers.distributed.blocks import ShardedRun, extend_blocks
+
+                config = dataclasses.replace(config, episodes=args.episodes)
+                try:
+                    extend_blocks(ShardedRun.load(out, config))
+                except ValueError as err:
+                    parser.error(_one_line(err))
+                config.save_json(out / "config.json")
             return _train_sharded(parser, args, config, out, native, resume=True)
         checkpoint = latest_checkpoint(out)
         if checkpoint is None:

@@ -24,7 +24,7 @@ from pathlib import Path
 from skillchain_torch.trainers.config.config import TrainConfig
 
 __all__ = ["SHARDING", "DONE", "guided_spans", "plan_blocks", "block_spans", "block_config",
-           "ShardedRun", "record_driver_wall", "previous_driver_wall"]
+           "ShardedRun", "extend_blocks", "record_driver_wall", "previous_driver_wall"]
 
 SHARDING = "sharding.json"  # RUN_DIR's record of the blocks (read by --resume)
 DONE = "block.json"  # written last by a finished block
@@ -119,6 +119,35 @@ class ShardedRun:
     def load(cls, out: Path, config: TrainConfig) -> ShardedRun:
         record = json.loads((Path(out) / SHARDING).read_text())
         return cls(config, Path(out), [tuple(s) for s in record["blocks"]])
+
+
+def extend_blocks(run: ShardedRun) -> None:
+    """Make every block of ``run`` (whose config asks for more episodes than its blocks ran)
+    continue from its newest checkpoint before any of its agents finished, as ``--resume
+    --episodes N`` does for a one-process run: the later checkpoints move into
+    ``checkpoints/superseded/``, a finished block's ``block.json`` beside them (so the block
+    runs again), and the block's ``config.json`` takes the new length. A block not yet started
+    is left as it is. ``ValueError`` in one line for a block that cannot be extended."""
+    from skillchain_torch.trainers.outputs.checkpoint import (
+        _checkpoints,
+        extension_checkpoint,
+        supersede_after,
+    )
+
+    for span in run.spans:
+        block_dir = run.block_dir(span)
+        if not _checkpoints(block_dir):
+            if (block_dir / DONE).is_file():
+                raise ValueError(f"{block_dir}: a finished block without checkpoints cannot be "
+                                 "extended; train the run again with more --episodes")
+            continue
+        path, _ = extension_checkpoint(block_dir)
+        supersede_after(block_dir, path)
+        if (block_dir / DONE).is_file():
+            aside = block_dir / "checkpoints" / "superseded"
+            aside.mkdir(exist_ok=True)
+            (block_dir / DONE).replace(aside / DONE)
+        block_config(run.config, *span, block_dir).save_json(block_dir / "config.json")
 
 
 def record_driver_wall(out: Path, seconds: float) -> None:

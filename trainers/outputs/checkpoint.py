@@ -216,7 +216,10 @@ def resume_checkpoint(directory: str | Path, trainer) -> Path:
         except DamagedCheckpoint as err:
             damaged.append((path, err))
             continue
-        _restore(state, path, trainer)
+        # A checkpoint from before any agent finished fits a run of more episodes too (an
+        # extended run, interrupted: extend_run's rule).
+        _restore(state, path, trainer,
+                 extend=int(state["trainer"]["episodes_done"].max()) < state["config"].episodes)
         for bad, err in damaged:
             aside = bad.with_name(bad.name + ".damaged")
             os.replace(bad, aside)
@@ -231,18 +234,40 @@ def extend_run(directory: str | Path, trainer) -> Path:
     """Restore ``trainer``, whose config asks for more episodes than the run in ``directory``
     had, from the newest checkpoint at which no agent had yet finished its episodes (an agent
     that finished stopped for good), so the run continues exactly as a run of the new length
-    would have; returns its path. ``ValueError`` in one line when there is none."""
+    would have; returns its path. The later checkpoints, of the shorter run, are moved into
+    ``checkpoints/superseded/`` (an interrupted extension then resumes from its own).
+    ``ValueError`` in one line when there is none."""
+    path, state = extension_checkpoint(directory)
+    _restore(state, path, trainer, extend=True)
+    supersede_after(directory, path)
+    return path
+
+
+def extension_checkpoint(directory: str | Path) -> tuple[Path, dict]:
+    """``(path, state)`` of the newest checkpoint under ``directory`` at which no agent had
+    finished its episodes: where a longer run of the same agents would have been too.
+    ``ValueError`` in one line when there is none."""
     for path in reversed(_checkpoints(directory)):
         try:
             state = read_checkpoint(path)
         except DamagedCheckpoint:
             continue
-        saved = state["config"]
-        if int(state["trainer"]["episodes_done"].max()) < saved.episodes:
-            _restore(state, path, trainer, extend=True)
-            return path
+        if int(state["trainer"]["episodes_done"].max()) < state["config"].episodes:
+            return path, state
     raise ValueError(f"{directory}: no checkpoint from before an agent finished its episodes, "
                      "so the run cannot be extended; train it again with more --episodes")
+
+
+def supersede_after(directory: str | Path, path: Path) -> None:
+    """Move the checkpoints under ``directory`` newer than ``path`` into
+    ``checkpoints/superseded/`` (kept, but no longer the run's)."""
+    found = _checkpoints(directory)
+    later = found[found.index(path) + 1:]
+    if later:
+        aside = path.parent / "superseded"
+        aside.mkdir(exist_ok=True)
+        for old in later:
+            os.replace(old, aside / old.name)
 
 
 def _checkpoints(directory: str | Path) -> list[Path]:
