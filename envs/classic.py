@@ -127,10 +127,12 @@ class BatchedClassicEnv:
     def sync(self) -> None:
         """Nothing to write back: the envs' state is this object's."""
 
-    def _ends(self, rows: np.ndarray, terminated: np.ndarray, obs: Tensor, reward: Tensor):
-        """The step's return: count the step, truncate at the limit (not where terminated)."""
+    def _ends(self, rows: np.ndarray, terminated: np.ndarray, reward: Tensor):
+        """The step's return: count the step, truncate at the limit (not where terminated),
+        observe the new states."""
         self._count[rows] += 1
         truncated = (self._count[rows] >= self.limit) & ~terminated
+        obs = self._obs(rows)
         if not (terminated.any() or truncated.any()):
             return obs, reward, None
         return obs, reward, (torch.from_numpy(terminated), torch.from_numpy(truncated))
@@ -193,7 +195,7 @@ class MountainCarStepper(BatchedClassicEnv):
         self.position[rows], self.velocity[rows] = x, v
         terminated = (x >= self.GOAL_POSITION) & (v >= self.GOAL_VELOCITY)
         reward = torch.full((rows.size,), -1.0, dtype=torch.float64)
-        return self._ends(rows, terminated, self._obs(rows), reward)
+        return self._ends(rows, terminated, reward)
 
 
 class AcrobotStepper(BatchedClassicEnv):
@@ -238,8 +240,15 @@ class AcrobotStepper(BatchedClassicEnv):
 
     def _obs(self, rows: np.ndarray) -> Tensor:
         s = self.state[rows]
-        obs = np.stack([np.cos(s[:, 0]), np.sin(s[:, 0]), np.cos(s[:, 1]), np.sin(s[:, 1]),
-                        s[:, 2], s[:, 3]], axis=1).astype(np.float32)  # fmt: skip
+        # Gymnasium keeps a reset's state in float32, so its first observation's cos and sin
+        # are float32 maths (they round differently from float64's on ~0.1% of draws).
+        fresh = (self._count[rows] == 0)[:, None]
+        s = np.where(fresh, s.astype(np.float32), s)  # (float32 values: exact in float64)
+        angles = s[:, :2]
+        cos = np.where(fresh, np.cos(angles.astype(np.float32)), np.cos(angles))
+        sin = np.where(fresh, np.sin(angles.astype(np.float32)), np.sin(angles))
+        obs = np.stack([cos[:, 0], sin[:, 0], cos[:, 1], sin[:, 1], s[:, 2], s[:, 3]],
+                       axis=1).astype(np.float32)  # fmt: skip
         return self.sizes.scale(torch.from_numpy(obs))
 
     def _dsdt(self, y: np.ndarray) -> np.ndarray:
@@ -290,7 +299,7 @@ class AcrobotStepper(BatchedClassicEnv):
         self.state[rows] = ns
         terminated = -np.cos(ns[:, 0]) - np.cos(ns[:, 1] + ns[:, 0]) > 1.0
         reward = torch.from_numpy(np.where(terminated, 0.0, -1.0))
-        return self._ends(rows, terminated, self._obs(rows), reward)
+        return self._ends(rows, terminated, reward)
 
 
 class CartPoleStepper(BatchedClassicEnv):
@@ -352,7 +361,7 @@ class CartPoleStepper(BatchedClassicEnv):
         terminated = ((x < -self.X_THRESHOLD) | (x > self.X_THRESHOLD)
                       | (theta < -self.THETA_THRESHOLD) | (theta > self.THETA_THRESHOLD))
         reward = torch.ones(rows.size, dtype=torch.float64)
-        return self._ends(rows, terminated, self._obs(rows), reward)
+        return self._ends(rows, terminated, reward)
 
 
 BATCHED = {"MountainCar-v0": MountainCarStepper, "Acrobot-v1": AcrobotStepper,

@@ -142,13 +142,15 @@ class HierarchicalCollector:
     @agent.setter
     def agent(self, agent) -> None:
         self._agent = agent
-        self.index = agent.index  # a fresh agent: its rows and actions are read again
+        # A fresh agent: its rows and actions are read again (its rows once it has begun).
+        self.index = agent.index if self.started else None
         self._action = None
+        self.finished = self.started and self.index.numel() == 0
 
     # ------------------------------------------------------------------ iteration
     @property
     def num_active(self) -> int:
-        return int(self.index.numel())
+        return self.population if self.index is None else int(self.index.numel())
 
     def start(self) -> None:
         """Reset every env and let the agents take their first decisions."""
@@ -170,7 +172,7 @@ class HierarchicalCollector:
             index = self.index  # the active agents (a batch's rows never change)
             if index.numel() == 0:
                 return
-            yield self._steps(index)
+            yield self._steps(index.clone())  # (the batch's own: the agent's stay its own)
 
     def rollout(self) -> TensorDict:
         """Collect one batch (starting the episodes if needed)."""

@@ -246,3 +246,22 @@ def test_resume_with_more_episodes_extends_a_sharded_run(ray_local, tmp_path):
         path.unlink()
     assert main(["train", "--resume", str(out), "--quiet"]) == 0
     _same(out, _one_process(**longer))
+
+
+def test_a_sharded_run_that_cannot_be_extended_is_left_as_it_was(ray_local, tmp_path, capsys):
+    """One block without a checkpoint from before an agent finished: one line naming it, and
+    no block moved or rewritten (every block is checked before any file changes)."""
+    fields = dict(agent="flat", checkpoint_every=1, **TINY)
+    out = tmp_path / "run"
+    assert main(["train", *_flags(**fields), "--out", str(out), "--workers", "2",
+                 "--block-size", "2", "--quiet"]) == 0
+    for path in sorted((out / "blocks" / "2-4" / "checkpoints").glob("ckpt_*.pt"))[:-1]:
+        path.unlink()  # only the checkpoint after its agents finished is left
+    before = {p: p.read_bytes() for p in sorted((out / "blocks").rglob("*")) if p.is_file()}
+    with pytest.raises(SystemExit):
+        main(["train", "--resume", str(out), "--episodes", "5", "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "blocks/2-4" in err and "cannot be extended" in err
+    after = {p: p.read_bytes() for p in sorted((out / "blocks").rglob("*")) if p.is_file()}
+    assert after == before
+    assert TrainConfig.load_json(out / "config.json").episodes == 3

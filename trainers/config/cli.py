@@ -333,7 +333,7 @@ def _train(parser, args) -> int:
 
                 config = dataclasses.replace(config, episodes=args.episodes)
                 try:
-                    extend_blocks(ShardedRun.load(out, config))
+                    extend_blocks(ShardedRun.load(out, config), native=native)
                 except ValueError as err:
                     parser.error(_one_line(err))
                 config.save_json(out / "config.json")

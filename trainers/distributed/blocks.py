@@ -121,19 +121,26 @@ class ShardedRun:
         return cls(config, Path(out), [tuple(s) for s in record["blocks"]])
 
 
-def extend_blocks(run: ShardedRun) -> None:
+def extend_blocks(run: ShardedRun, native: bool | None = None) -> None:
     """Make every block of ``run`` (whose config asks for more episodes than its blocks ran)
     continue from its newest checkpoint before any of its agents finished, as ``--resume
     --episodes N`` does for a one-process run: the later checkpoints move into
     ``checkpoints/superseded/``, a finished block's ``block.json`` beside them (so the block
     runs again), and the block's ``config.json`` takes the new length. A block not yet started
-    is left as it is. ``ValueError`` in one line for a block that cannot be extended."""
+    is left as it is.
+
+    Every block is checked first (its checkpoint found and restored into a trainer of the new
+    length, ``native`` as the run will be), and only then is any file moved: a block that
+    cannot be extended raises ``ValueError`` in one line and leaves the run as it was."""
+    from skillchain_torch.trainers.loop.population import PopulationTrainer
     from skillchain_torch.trainers.outputs.checkpoint import (
         _checkpoints,
+        _restore,
         extension_checkpoint,
         supersede_after,
     )
 
+    plan = []
     for span in run.spans:
         block_dir = run.block_dir(span)
         if not _checkpoints(block_dir):
@@ -141,13 +148,20 @@ def extend_blocks(run: ShardedRun) -> None:
                 raise ValueError(f"{block_dir}: a finished block without checkpoints cannot be "
                                  "extended; train the run again with more --episodes")
             continue
-        path, _ = extension_checkpoint(block_dir)
+        config = block_config(run.config, *span, block_dir)
+        path, state = extension_checkpoint(block_dir)
+        try:  # (a trial: the block's own run restores it again when it starts)
+            _restore(state, path, PopulationTrainer(config, native=native), extend=True)
+        except ValueError as err:
+            raise ValueError(f"{block_dir}: cannot be extended ({err})") from None
+        plan.append((block_dir, path, config))
+    for block_dir, path, config in plan:
         supersede_after(block_dir, path)
         if (block_dir / DONE).is_file():
             aside = block_dir / "checkpoints" / "superseded"
             aside.mkdir(exist_ok=True)
             (block_dir / DONE).replace(aside / DONE)
-        block_config(run.config, *span, block_dir).save_json(block_dir / "config.json")
+        config.save_json(block_dir / "config.json")
 
 
 def record_driver_wall(out: Path, seconds: float) -> None:
