@@ -3,7 +3,8 @@
 #   make test   the whole test suite
 # Both create .venv on first use. torch is pinned first so pip takes the local CPU build
 # instead of pulling several GB of CUDA wheels. --no-cache-dir: a CI machine once ran out of
-# disk mid-install (ENOSPC), and the cache only doubles the wheels on a one-off install.
+# disk mid-install (ENOSPC), and the cache only doubles the wheels on a one-off install. -qq:
+# errors only (setuptools prints a notice on every editable install, which is not one).
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -12,13 +13,13 @@ TORCH_PIN := torch==2.13.0
 # What running needs (make demo), then what testing adds (make test: pytest, ruff, Ray, ...).
 $(VENV)/.installed-run: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --no-cache-dir --upgrade pip
-	$(PY) -m pip install --quiet --no-cache-dir $(TORCH_PIN)
-	$(PY) -m pip install --quiet --no-cache-dir -e .
+	$(PY) -m pip install -qq --no-cache-dir --upgrade pip
+	$(PY) -m pip install -qq --no-cache-dir $(TORCH_PIN)
+	$(PY) -m pip install -qq --no-cache-dir -e .
 	touch $@
 
 $(VENV)/.installed: $(VENV)/.installed-run
-	$(PY) -m pip install --quiet --no-cache-dir -e ".[dev,bench]"
+	$(PY) -m pip install -qq --no-cache-dir -e ".[dev,bench]"
 	touch $@
 
 .PHONY: install test demo lint bench docs
