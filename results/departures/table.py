@@ -54,6 +54,8 @@ def load(folder: Path, runs: int = 50) -> dict[str, np.ndarray]:
         path = folder / name / "returns.npy"
         if path.is_file():
             arms[name] = np.load(path)
+    for path in sorted(folder.glob("candidate*/returns.npy")):  # (candidate.sh's arms)
+        arms[path.parent.name] = np.load(path)
     return arms
 
 
@@ -63,8 +65,8 @@ def table(arms: dict[str, np.ndarray]) -> str:
             " | ".join(f"{a}-{b}" for a, b in WINDOWS) + " |")
     lines = [head, "|---|---:|" + "---:|" * len(WINDOWS)]
     for name, r in arms.items():
-        label = name if name in ("flat", "default") else \
-            f"{name}: {ARMS[name][0]} {ARMS[name][1]} -> {ARMS[name][2]}"
+        label = f"{name}: {ARMS[name][0]} {ARMS[name][1]} -> {ARMS[name][2]}" \
+            if name in ARMS else name
         cells = []
         for a, b in WINDOWS:
             m, h = mean_ci(window(r, a, b))
@@ -103,6 +105,21 @@ def needed(arms: dict[str, np.ndarray]) -> str:
     return "\n".join(lines)
 
 
+def candidates(arms: dict[str, np.ndarray]) -> str:
+    """Rule 3 for the candidates: not behind the default over 1-250 and ahead of flat over
+    26-50. ``candidate-rule`` is the rule's own (step 2); any other is exploratory."""
+    lines = ["| candidate | minus the default, 1-250 | minus flat, 26-50 | replaces the default "
+             "by rule 3 |", "|---|---:|---:|---|"]
+    for name in (n for n in arms if n.startswith("candidate")):
+        d, dh = diff_ci(window(arms[name], 1, 250), window(arms["default"], 1, 250))
+        f, fh = diff_ci(window(arms[name], 26, 50), window(arms["flat"], 26, 50))
+        ok = d + dh >= 0 and f - fh > 0
+        kind = "" if name == "candidate-rule" else " (exploratory)"
+        lines.append(f"| {name}{kind} | {d:+,.0f} ± {dh:,.0f} | {f:+,.0f} ± {fh:,.0f} | "
+                     f"{'yes' if ok else 'no'} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder", type=Path)
@@ -113,6 +130,9 @@ def main(argv=None) -> None:
     print(table(arms))
     print()
     print(needed(arms))
+    if any(name.startswith("candidate") for name in arms):
+        print()
+        print(candidates(arms))
 
 
 if __name__ == "__main__":
