@@ -54,8 +54,10 @@ class BatchedClassicEnv:
     """What the batched classic-control steppers share (the ``EnvStepper`` protocol): P envs,
     agent p's starts drawn from its own ``np_random(seed + p)``, the active rows, each env's
     step count and Gymnasium's time limit. A subclass names its ``KIND``, its state arrays
-    (``STATE``: attributes of ``[P, ...]`` float64), its ``TIME_LIMIT``, and writes
-    :meth:`_start_state` (one agent's reset draw), :meth:`_obs` and :meth:`step`.
+    (``STATE``: attributes of ``[P, STATE_DIM]`` float64, ``[P]`` where ``STATE_DIM`` is 0;
+    by default one, ``state``),
+    its ``TIME_LIMIT``, and writes :meth:`_start_state` (one agent's reset draw), :meth:`_obs`
+    and :meth:`step`.
 
     Args:
         population: P, one env per agent.
@@ -66,7 +68,8 @@ class BatchedClassicEnv:
     """
 
     KIND: str
-    STATE: tuple[str, ...]
+    STATE: tuple[str, ...] = ("state",)
+    STATE_DIM: int = 0
     TIME_LIMIT: int
 
     def __init__(self, population: int, sizes, seed: int = 0,
@@ -80,6 +83,9 @@ class BatchedClassicEnv:
             self._start_state(rng)
         self._count = np.zeros(self.population, dtype=np.int64)
         self.index = torch.arange(self.population)
+        shape = (self.population, self.STATE_DIM) if self.STATE_DIM else (self.population,)
+        for name in self.STATE:
+            setattr(self, name, np.zeros(shape, dtype=np.float64))
 
     def _start_state(self, rng) -> np.ndarray:
         """One env's start state, drawn from its generator as Gymnasium's ``reset``."""
@@ -105,7 +111,7 @@ class BatchedClassicEnv:
             self._count[p] = 0
 
     def _set_row(self, p: int, start: np.ndarray) -> None:
-        raise NotImplementedError
+        self.state[p] = start
 
     def start(self) -> Tensor:
         """Reset every env; all active; observations ``[P, D]`` mapped by the specs."""
@@ -163,13 +169,7 @@ class MountainCarStepper(BatchedClassicEnv):
     MIN_POSITION, MAX_POSITION, MAX_SPEED = -1.2, 0.6, 0.07
     GOAL_POSITION, GOAL_VELOCITY, FORCE, GRAVITY = 0.5, 0.0, 0.001, 0.0025
     TIME_LIMIT = 200  # MountainCar-v0's TimeLimit
-    KIND, STATE = "mountain-car", ("position", "velocity")
-
-    def __init__(self, population: int, sizes, seed: int = 0,
-                 max_episode_steps: int | None = None):  # fmt: skip
-        super().__init__(population, sizes, seed, max_episode_steps)
-        self.position = np.zeros(self.population, dtype=np.float64)
-        self.velocity = np.zeros(self.population, dtype=np.float64)
+    KIND, STATE = "mountain-car", ("position", "velocity")  # [P] each
 
     def _start_state(self, rng) -> np.ndarray:
         return np.array([rng.uniform(low=-0.6, high=-0.4), 0.0])
@@ -224,19 +224,11 @@ class AcrobotStepper(BatchedClassicEnv):
     AVAIL_TORQUE = np.array([-1.0, 0.0, 1.0])
     TIME_LIMIT = 500  # Acrobot-v1's TimeLimit
 
-    KIND, STATE = "acrobot", ("state",)
-
-    def __init__(self, population: int, sizes, seed: int = 0,
-                 max_episode_steps: int | None = None):  # fmt: skip
-        super().__init__(population, sizes, seed, max_episode_steps)
-        self.state = np.zeros((self.population, 4), dtype=np.float64)
+    KIND, STATE_DIM = "acrobot", 4
 
     def _start_state(self, rng) -> np.ndarray:
         # AcrobotEnv.reset: uniform in [-0.1, 0.1]^4, as float32
         return rng.uniform(low=-0.1, high=0.1, size=(4,)).astype(np.float32)
-
-    def _set_row(self, p: int, start: np.ndarray) -> None:
-        self.state[p] = start
 
     def _obs(self, rows: np.ndarray) -> Tensor:
         s = self.state[rows]
@@ -327,18 +319,10 @@ class CartPoleStepper(BatchedClassicEnv):
     THETA_THRESHOLD = 12 * 2 * math.pi / 360
     X_THRESHOLD = 2.4
     TIME_LIMIT = 500  # CartPole-v1's TimeLimit
-    KIND, STATE = "cart-pole", ("state",)
-
-    def __init__(self, population: int, sizes, seed: int = 0,
-                 max_episode_steps: int | None = None):  # fmt: skip
-        super().__init__(population, sizes, seed, max_episode_steps)
-        self.state = np.zeros((self.population, 4), dtype=np.float64)
+    KIND, STATE_DIM = "cart-pole", 4
 
     def _start_state(self, rng) -> np.ndarray:
         return rng.uniform(low=-0.05, high=0.05, size=(4,))  # CartPoleEnv.reset
-
-    def _set_row(self, p: int, start: np.ndarray) -> None:
-        self.state[p] = start
 
     def _obs(self, rows: np.ndarray) -> Tensor:
         return self.sizes.scale(torch.from_numpy(self.state[rows].astype(np.float32)))

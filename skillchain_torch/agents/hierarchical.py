@@ -303,6 +303,7 @@ class HierarchicalAgent(nn.Module):
         self.gamma = float(gamma)
         self.max_option_steps = int(max_option_steps)
         self.events = tuple(events)
+        self._check_target_events()
         columns = (shared_fourier_columns(self.features, self.bank.q_head)
                    if type(self.features) is FourierBasis else None)  # fmt: skip
         self.register_buffer("_code_columns", columns, persistent=False)
@@ -650,16 +651,21 @@ class HierarchicalAgent(nn.Module):
         A chained option's target is its parent's own initiation set (the classifier's, as in
         discovery), not the parent's set narrowed by the no-overlap rule."""
         raw = contains if self._exclusion is None else self._raw_contains
-        bank = self.bank
         # OptionBank.target_reached's answer from the events' values (compiled where built):
-        # this runs every step, and target_reached costs ~140 us of small torch ops.
+        # this runs every step, and target_reached costs ~140 us of small torch ops. The
+        # base events' values at s' stay in last_events (skill chaining's triggers).
+        self.last_events = evaluate_base_events(self.events, next_obs, terminated, reward)
+        return self.rules.target_indicator(self.bank, self.last_events, raw)
+
+    def _check_target_events(self) -> None:
+        """Refuse a bank whose slots target an event the agent lacks (checked when the bank
+        arrives, at construction and when a state is loaded, not every step: discovery
+        only ever gives its slots the agent's own events)."""
+        bank = self.bank
         if bank.slots and int(bank.target_event.max()) >= len(self.events):
             used = int(bank.target_event.max())
             raise ValueError(f"target event {used} used by a slot, but only {len(self.events)} "
                              f"given")  # fmt: skip
-        # The base events' values at s' stay in last_events (skill chaining's triggers).
-        self.last_events = evaluate_base_events(self.events, next_obs, terminated, reward)
-        return self.rules.target_indicator(bank, self.last_events, raw)
 
     def _best_decision(self) -> Tensor:
         """``[P]``: ``max_d Q(s', d)`` over the decisions available at ``s'`` (``last_q``)."""
@@ -847,6 +853,7 @@ class HierarchicalAgent(nn.Module):
             else:
                 replay.load_state_dict(state["option_replay"])
         self.bank.load_state_dict(state["bank"])
+        self._check_target_events()
         self.rng.load_state_dict(state["rng"])
         self.rng.to(device)
         self._index = state["index"].to(device)

@@ -45,9 +45,8 @@ def test_targets_equal_target_reached(native, monkeypatch):
 
 
 def test_targets_refuse_an_event_the_agent_lacks():
+    """Refused when the bank arrives (at construction), not in the step."""
     bank = random_bank()
     bank.target_event[0, 0], bank.status[0, 0] = 2, int(OptionStatus.LEARNED)
-    agent = HierarchicalAgent(bank, order=1, events=EVENTS)
-    obs = torch.full((40, 4), 0.5, dtype=F64)
     with pytest.raises(ValueError, match="target event 2 used by a slot, but only 2 given"):
-        agent.targets(obs, torch.zeros(40, dtype=torch.bool), bank.classifier.contains(obs))
+        HierarchicalAgent(bank, order=1, events=EVENTS)

@@ -157,29 +157,13 @@ def test_which_envs_get_a_batched_stepper(sizes):
     assert batched_stepper("gymnasium:my_module:MountainCar-v0", 2, sizes) is None
 
 
-def test_acrobot_trainer_run_is_the_gym_run_and_resumes(tmp_path):
-    config = TrainConfig(agent="flat", env=ACROBOT, runs=3, episodes=3, seed=3,
-                         checkpoint_every=2)  # fmt: skip
+@pytest.mark.parametrize("env, kind, bounds", [
+    (ID, MountainCarStepper, None), (ACROBOT, AcrobotStepper, None),
+    (CARTPOLE, CartPoleStepper, CART_BOUNDS)])
+def test_the_trainer_picks_it_and_gets_the_gym_run_bit_for_bit(env, kind, bounds):
+    config = TrainConfig(agent="flat", env=env, runs=4, episodes=4, seed=3, obs_bounds=bounds)
     batched = PopulationTrainer(config)
-    assert isinstance(batched.stepper, AcrobotStepper)
-    batched.train()
-    gym = PopulationTrainer(config, batched_envs=False).train()
-    assert np.array_equal(batched.returns, gym.returns)
-    assert np.array_equal(batched.lengths, gym.lengths)
-    interrupted = PopulationTrainer(config, out_dir=tmp_path)
-    interrupted.register_op("post_checkpoint", InterruptAt())
-    with pytest.raises(KeyboardInterrupt):
-        interrupted.train()
-    resumed = PopulationTrainer(config, out_dir=tmp_path)
-    load_checkpoint(latest_checkpoint(tmp_path), resumed)
-    resumed.train()
-    assert np.array_equal(resumed.returns, batched.returns)
-
-
-def test_the_trainer_picks_it_and_gets_the_gym_run_bit_for_bit():
-    config = TrainConfig(agent="flat", env=ID, runs=4, episodes=4, seed=3)
-    batched = PopulationTrainer(config)
-    assert isinstance(batched.stepper, MountainCarStepper)
+    assert isinstance(batched.stepper, kind)
     batched.train()
     gym = PopulationTrainer(config, batched_envs=False)
     assert isinstance(gym.stepper, EnvStepper)
@@ -206,8 +190,9 @@ class InterruptAt:
             raise KeyboardInterrupt
 
 
-def test_a_run_on_it_resumes_bit_for_bit(tmp_path):
-    config = TrainConfig(agent="skill-chaining", env=ID, runs=3, episodes=6, seed=2,
+@pytest.mark.parametrize("env", [ID, ACROBOT])
+def test_a_run_on_it_resumes_bit_for_bit(tmp_path, env):
+    config = TrainConfig(agent="skill-chaining", env=env, runs=3, episodes=6, seed=2,
                          checkpoint_every=3)  # fmt: skip
     reference = PopulationTrainer(config).train()
     interrupted = PopulationTrainer(config, out_dir=tmp_path)
