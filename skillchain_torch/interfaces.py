@@ -150,7 +150,14 @@ class ValueHead(Protocol):
 
     def set_values(self, mask: Tensor, value: Tensor) -> None:
         """``Q(s, d) = value[p, d]`` everywhere for the ``(p, d)`` in ``mask [P, D]`` (how
-        discovery starts a joining option's value; the only write discovery makes)."""
+        discovery starts a joining option's value, with :meth:`fit_values` the only writes
+        discovery makes)."""
+
+    # Optional, for the default preset's ``value_start="agent"`` (``policy_start="top-level"``
+    # asks the same of the option head): ``fit_values(mask [P, D], phi [N, F], values [P, N,
+    # D])`` fits ``Q(s, d)`` to ``values`` on the states ``phi`` for the ``(p, d)`` in ``mask``
+    # (MLPQHead, MLPOptionQHead and FourierOptionQHead have it; without it, only
+    # ``value_start="max-sample"`` and ``policy_start="zero"``, the paper's, take the head).
 
     def parameters(self, recurse: bool = True):
         """What an optimizer trains (``nn.Module``'s); the built-in linear head has none and

@@ -46,3 +46,25 @@ def rowwise_sum(x: Tensor) -> Tensor:
 def rowwise_dot(a: Tensor, b: Tensor) -> Tensor:
     """Batch-invariant ``(a * b).sum(-1)`` with broadcasting; never a BLAS call."""
     return rowwise_sum(a * b)
+
+
+def least_squares(h: Tensor, y: Tensor) -> Tensor:
+    """``[F, C]`` minimising ``||h w - y||`` for ``h [N, F]``, ``y [N, C]``, through ``pinv`` (an
+    SVD) and :func:`rowwise_dot`: the same bits on every call (``lstsq`` and ``matmul`` round
+    differently with the operands' addresses).
+
+    Example:
+        >>> h = torch.tensor([[1.0, 0.0], [1.0, 1.0], [1.0, 2.0]], dtype=torch.float64)
+        >>> least_squares(h, h @ torch.tensor([[2.0], [3.0]], dtype=torch.float64)).round(
+        ...     decimals=9).tolist()
+        [[2.0], [3.0]]
+    """
+    pinv = torch.linalg.pinv(h)  # [F, N]
+    return rowwise_dot(pinv[None, :, :], y.T.contiguous()[:, None, :]).T  # [F, C]
+
+
+def affine_rows(x: Tensor, weight: Tensor, bias: Tensor) -> Tensor:
+    """``x [N, I] @ weight.T + bias`` for ``weight [O, I]``, ``bias [O]``, by
+    :func:`rowwise_dot` (no BLAS call: the same bits whatever the operands' addresses)."""
+    return rowwise_dot(x[:, None, :], weight[None]) + bias
+

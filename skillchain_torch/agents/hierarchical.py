@@ -909,14 +909,13 @@ class SkillChainingAgent(HierarchicalAgent):
                  value_start: str = "max-sample", value_bonus: float = 0.0,
                  chaining: bool = True, **kwargs):  # fmt: skip
         super().__init__(bank, events=events, **kwargs)
-        # Two starts read the linear head's weights and the Fourier basis directly.
-        uses = [f"value_start={value_start!r}"] * (value_start == "agent") + \
-            [f"policy_start={policy_start!r}"] * (policy_start != "zero")
-        if uses and not (self.closed_form and type(self.features) is FourierBasis):
-            raise ValueError(f"{' and '.join(uses)} fit the built-in LinearQHead over a "
-                             f"FourierBasis, not {type(self.q_head).__name__} over "
-                             f"{type(self.features).__name__}: use value_start='max-sample' "
-                             "and policy_start='zero' (the paper's) with your own head")
+        # Two starts read the agent's values: the linear head's weights in its Fourier basis,
+        # or any head's values on a grid of states, which the written head fits (fit_values).
+        linear = self.closed_form and type(self.features) is FourierBasis
+        if value_start == "agent" and not (linear or hasattr(self.q_head, "fit_values")):
+            raise ValueError(f"value_start='agent' fits the agent's own values in the top head, "
+                             f"which {type(self.q_head).__name__} cannot take (it has no "
+                             "fit_values): use value_start='max-sample' (the paper's)")
         self.discovery = self.rules(
             self.bank, self.events, gestation=gestation, max_branching=max_branching,
             convergence_threshold=convergence_threshold,

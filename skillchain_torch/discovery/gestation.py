@@ -29,6 +29,9 @@ them):
   is believed about as good as the primitives, not everywhere at the best value seen at its
   target.
 
+With neural heads the two starts are the same fits in the written head's last layer, on a grid
+of states (:func:`fitted_starts`, each head's ``fit_values``).
+
 Example:
     >>> import torch
     >>> from skillchain_torch.modules import LinearQHead
@@ -41,6 +44,8 @@ Example:
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor
 
@@ -50,7 +55,8 @@ from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import OptionBank, OptionStatus
 
 __all__ = ["GESTATION_EPISODES", "POLICY_STARTS", "VALUE_STARTS", "StateValueFit",
-           "cached_projection", "gestation_over", "initialise_option_policies",
+           "cached_projection", "fit_grid", "fitted_starts", "grid_values", "gestation_over",
+           "initialise_option_policies",
            "initialise_option_values", "state_value_fit", "value_projection"]
 
 GESTATION_EPISODES = 10
@@ -189,6 +195,80 @@ def initialise_option_policies(option_head, q_head: LinearQHead, mask: Tensor,
         # (agent p's offset in the population), and agents must not depend on the population.
         w = rowwise_dot(top[p].to(projection.dtype)[:, None, :], projection[None])  # [A, F_o]
         weight[p, k] = w.to(weight.dtype)
+
+
+# ----------------------------------------------------------------------------------------------
+# The same two starts for heads that are not linear in a Fourier basis (a neural top level or
+# option head): the agent's values are read on a grid of states and each written head fits them
+# in its own last layer (``fit_values``: least squares, the hidden layers unchanged). With both
+# heads linear in Fourier bases the fits above are used, exactly as before.
+# ----------------------------------------------------------------------------------------------
+
+FIT_STATES = 2048  # about this many grid states: a 64-unit layer needs more than 65
+
+
+def fit_grid(dim: int, dtype: torch.dtype = torch.float64,
+             device: torch.device | str | None = None) -> Tensor:  # fmt: skip
+    """``[N, dim]``: the regular grid over the observation box the neural starts are fitted
+    on, ``ceil(2048 ** (1 / dim))`` points a dim (at least 3): 2,116 states on MountainCar,
+    2,401 on Pinball, 6,561 on LunarLander.
+
+    Example:
+        >>> fit_grid(2).shape, fit_grid(4).shape
+        (torch.Size([2116, 2]), torch.Size([2401, 4]))
+    """
+    points = max(3, math.ceil(FIT_STATES ** (1.0 / dim) - 1e-9))
+    low, high = observation_box(dim)
+    axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
+    return torch.cartesian_prod(*axes).reshape(-1, dim).to(device)
+
+
+@torch.no_grad()
+def grid_values(q_head, phi: Tensor, p: int) -> Tensor:
+    """``[N, D]``: agent p's top-level values ``Q(s, d)`` at the grid's features ``phi [N, F]``
+    (agent p alone: a copy of its head, or its own weights for the linear head)."""
+    if isinstance(q_head, LinearQHead):  # chunks: N x D x F products stay small
+        w = q_head.weight[p].to(phi.dtype)
+        return torch.cat([rowwise_dot(chunk[:, None, :], w[None]) for chunk in phi.split(256)])
+    one = q_head.select_agents([p])
+    return one(phi[:, None, :])[:, 0, :].to(torch.float64)
+
+
+@torch.no_grad()
+def fitted_starts(join: Tensor, q_head, option_head, features, grid: Tensor,
+                  num_primitives: int, value_bonus: float | None,
+                  policy: bool) -> None:  # fmt: skip
+    """The joining options ``join [P, K]`` start from the agent's values, for any heads with
+    ``fit_values`` (:class:`~skillchain_torch.modules.MLPQHead`,
+    :class:`~skillchain_torch.options.MLPOptionQHead`): with ``value_bonus`` not None,
+    ``Q(s, o) ~ max_a Q(s, a) + value_bonus`` in the top head (``value_start="agent"``); with
+    ``policy``, the option's ``Q_o(s, a) ~ Q(s, a)`` (``policy_start="top-level"``).
+
+    Example:
+        >>> from skillchain_torch.modules import MLPQHead
+        >>> from skillchain_torch.options import MLPOptionQHead
+        >>> top = MLPQHead(num_features=4, num_decisions=5 + 2, population=1, hidden=8)
+        >>> top.set_values(torch.tensor([[False, False, True, False, False, False, False]]),
+        ...                torch.full((1, 7), 30.0, dtype=torch.float64))  # Q(s, a=2) = 30
+        >>> opt = MLPOptionQHead(population=1, slots=2, hidden=8, layers=1)
+        >>> fitted_starts(torch.tensor([[False, True]]), top, opt, torch.nn.Identity(),
+        ...               fit_grid(4), 5, value_bonus=5.0, policy=True)
+        >>> s = torch.full((1, 4), 0.4, dtype=torch.float64)
+        >>> round(float(top(s)[0, 6]), 3), opt(s)[0, 1].argmax().item()
+        (35.0, 2)
+    """
+    phi = features(grid)
+    for p in join.any(-1).nonzero()[:, 0].tolist():
+        values = grid_values(q_head, phi, p)[:, :num_primitives]  # [N, A]
+        rows = join[p : p + 1].new_zeros(join.shape)
+        rows[p] = join[p]
+        if value_bonus is not None:
+            best = values.amax(-1, keepdim=True) + value_bonus  # [N, 1]
+            target = best.expand(-1, q_head.num_decisions).expand(join.shape[0], -1, -1)
+            mask = torch.cat([rows.new_zeros(rows.shape[0], num_primitives), rows], dim=1)
+            q_head.fit_values(mask, phi, target)
+        if policy:
+            option_head.fit_values(rows, grid, values.expand(join.shape[0], -1, -1))
 
 
 class StateValueFit:

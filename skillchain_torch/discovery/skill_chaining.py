@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import (
     GoalEvent,
@@ -74,6 +75,8 @@ from .gestation import (
     POLICY_STARTS,
     VALUE_STARTS,
     cached_projection,
+    fit_grid,
+    fitted_starts,
     gestation_over,
     initialise_option_policies,
     initialise_option_values,
@@ -144,14 +147,18 @@ class SkillChaining:
             projected onto the option's basis (:func:`~.gestation.initialise_option_policies`),
             as deep skill chaining starts options from the global agent;
             ``"top-level-shifted"`` moves that copy onto the option's own scale (its target
-            worth ``completion_reward``, :mod:`~.value_scale`). Both need ``top_basis`` and a
-            Fourier option head.
+            worth ``completion_reward``, :mod:`~.value_scale`). With heads that are not linear
+            in a Fourier basis (an MLP top level or option head) ``"top-level"`` is the same
+            copy fitted in the option head's last layer on a grid of states
+            (:func:`~.gestation.fitted_starts`); ``"top-level-shifted"`` needs Fourier heads.
         value_start: how ``Q(s, o)`` starts when the option joins
             (:data:`~.gestation.VALUE_STARTS`): ``"max-sample"`` (the paper: the best value
             sampled when its target fired in gestation, everywhere) or ``"agent"`` (the agent's
-            own ``max_a Q(s, a)`` fitted in its basis, plus ``value_bonus``). Needs ``top_basis``.
+            own ``max_a Q(s, a)`` fitted in its basis, plus ``value_bonus``; an MLP top level
+            fits it in its last layer). Needs ``top_basis``.
         value_bonus: added to ``Q(s, o)`` everywhere under ``value_start="agent"``.
-        top_basis: the agent's top-level :class:`~skillchain_torch.features.FourierBasis`.
+        top_basis: the agent's top-level features (a :class:`~skillchain_torch.features.
+            FourierBasis`, or ``nn.Identity()`` under an MLP top level).
         chaining: a learned initiation set becomes a target event (section 4.3: the chain
             grows backwards from the goal). ``False``: the controls of :mod:`.subgoals`; only
             base events are targets, and base event n >= 1 is listed once the agent has n
@@ -181,18 +188,27 @@ class SkillChaining:
             raise ValueError(f"value_start must be one of {', '.join(VALUE_STARTS)}, "
                              f"got {value_start!r}")  # fmt: skip
         if value_start == "agent" and top_basis is None:
-            raise ValueError("value_start 'agent' needs the agent's Fourier basis (top_basis)")
+            raise ValueError("value_start 'agent' needs the agent's top-level features "
+                             "(top_basis)")  # fmt: skip
         self.value_start, self.value_bonus = value_start, float(value_bonus)
         self._value_fit = None
         if policy_start not in POLICY_STARTS:
             raise ValueError(f"policy_start must be one of {', '.join(POLICY_STARTS)}, "
                              f"got {policy_start!r}")  # fmt: skip
-        if policy_start != "zero" and (top_basis is None
-                                       or getattr(bank.q_head, "basis", None) is None):
-            raise ValueError(f"policy_start {policy_start!r} needs the agent's Fourier basis "
-                             "(top_basis) and a Fourier option head (FourierOptionQHead): use "
-                             "policy_start='zero' (--policy-start zero) with any other head")
+        fourier_options = getattr(bank.q_head, "basis", None) is not None
+        if policy_start != "zero" and (top_basis is None or not (
+                fourier_options or hasattr(bank.q_head, "fit_values"))):  # fmt: skip
+            raise ValueError(f"policy_start {policy_start!r} needs the agent's top-level "
+                             "features (top_basis) and an option head that can take the "
+                             "agent's values (FourierOptionQHead, or one with fit_values such "
+                             "as MLPOptionQHead): use policy_start='zero' (--policy-start zero) "
+                             "with any other head")  # fmt: skip
+        if policy_start == "top-level-shifted" and not (
+                fourier_options and isinstance(top_basis, FourierBasis)):  # fmt: skip
+            raise ValueError("policy_start 'top-level-shifted' needs Fourier heads (its shift "
+                             "reads the linear values): use policy_start='top-level'")
         self.policy_start, self.top_basis = policy_start, top_basis
+        self._grid: Tensor | None = None  # the neural starts' fit states (fit_grid), once
         self.completion_reward = float(completion_reward)
         self._projection: Tensor | None = None
         if gestation < 0 or max_branching < 0 or max_option_steps < 1:
@@ -534,13 +550,23 @@ class SkillChaining:
             value = torch.nan_to_num(self.gestation_q, neginf=0.0)
             bank.set_status(join, OptionStatus.LEARNING)
             initialise_option_values(q_head, join, value, q_head.num_decisions - bank.slots)
-            if self.value_start == "agent":
+            linear = type(q_head) is LinearQHead and isinstance(self.top_basis, FourierBasis)
+            fourier_options = linear and getattr(bank.q_head, "basis", None) is not None
+            if self.value_start == "agent" and linear:
                 self._agent_values(q_head, join)
-            if self.policy_start != "zero":  # a copy of the top level's primitive values
+            if self.policy_start != "zero" and fourier_options:  # the top level's values
                 if self._projection is None:  # once per run: a fixed grid, no random numbers
                     self._projection = cached_projection(self.top_basis, bank.q_head.basis)
                 initialise_option_policies(bank.q_head, q_head, join, self._projection,
                                            bank.num_actions)  # fmt: skip
+            neural_value = self.value_start == "agent" and not linear
+            neural_policy = self.policy_start != "zero" and not fourier_options
+            if neural_value or neural_policy:  # the same starts, fitted in the heads' last layers
+                if self._grid is None:  # once per run: a fixed grid, no random numbers
+                    self._grid = fit_grid(bank.obs_dim, device=bank.status.device)
+                fitted_starts(join, q_head, bank.q_head, self.top_basis, self._grid,
+                              q_head.num_decisions - bank.slots,
+                              self.value_bonus if neural_value else None, neural_policy)
             if self.policy_start == "top-level-shifted":  # ... on the option's own scale
                 level = target_levels(bank, q_head, self.top_basis, join)
                 shift_option_values(bank.q_head, join, self.completion_reward - level)

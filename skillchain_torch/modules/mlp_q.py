@@ -27,6 +27,7 @@ import math
 import torch
 from torch import Tensor, nn
 
+from skillchain_torch.invariant import affine_rows, least_squares
 from skillchain_torch.modules.stacked import stacked_affine
 
 __all__ = ["MLPQHead"]
@@ -143,6 +144,35 @@ class MLPQHead(nn.Module):
         weight.copy_(torch.where(m[:, None, :], torch.zeros_like(weight), weight))
         target = (value.to(bias) / self.value_scale)
         bias.copy_(torch.where(m, target, bias))
+
+    @torch.no_grad()
+    def fit_values(self, mask: Tensor, phi: Tensor, values: Tensor) -> None:
+        """``Q(s, d) ~ values[p, n, d]`` on the states ``phi [N, F]``, for ``(p, d)`` in ``mask
+        [P, D]``: the decision's output weights and bias become the least-squares fit in agent
+        p's own last hidden layer (the hidden layers stay as they are).
+
+        This is the neural counterpart of fitting a linear head's weights in its basis: how a
+        joining option's value starts from the agent's own values (``value_start="agent"``).
+
+        Example:
+            >>> head = MLPQHead(num_features=2, num_decisions=3, population=1, hidden=8)
+            >>> phi = torch.rand(50, 2, dtype=torch.float64)
+            >>> head.fit_values(torch.tensor([[False, False, True]]), phi,
+            ...                 torch.full((1, 50, 3), 40.0, dtype=torch.float64))
+            >>> round(float(head(phi[:3, None])[..., 2].mean()), 3)
+            40.0
+        """
+        weight, bias = self.weights[-1], self.biases[-1]
+        m = mask.to(device=weight.device, dtype=torch.bool)
+        for p in m.any(-1).nonzero()[:, 0].tolist():  # each agent alone: no population effect
+            x = phi.to(weight)
+            for w, b in zip(self.weights[:-1], self.biases[:-1]):
+                x = torch.tanh(affine_rows(x, w[p].T, b[p]))
+            h = torch.cat([x, torch.ones_like(x[:, :1])], dim=-1).to(torch.float64)
+            fit = least_squares(h, values[p].to(h) / self.value_scale)  # [H + 1, D]
+            weight[p] = torch.where(m[p], fit[:-1].to(weight), weight[p])
+            bias[p] = torch.where(m[p], fit[-1].to(bias), bias[p])
+        self.writes += m.any(-1).to(self.writes)  # (a learner copies these agents' targets)
 
     def select_agents(self, index) -> MLPQHead:
         """A new head holding agents ``index`` (repeats allowed), weights copied."""

@@ -18,6 +18,7 @@ from torch import Tensor, nn
 from torch.func import stack_module_state
 from torch.nn import functional
 
+from skillchain_torch.invariant import affine_rows, least_squares
 from skillchain_torch.modules.stacked import AugmentedCache, augment, augmented_affine
 from skillchain_torch.options.q_head import _DTYPES, NUM_ACTIONS, OBS_DIM, OptionQHead, dtype_name
 from skillchain_torch.options.status import agent_index, agent_seeds, check_slot_mask
@@ -205,6 +206,37 @@ class MLPOptionQHead(OptionQHead):
                 b.sub_(self.lr * gb)
         delta = delta.detach()
         return torch.where(mask, delta, torch.zeros_like(delta))
+
+    @torch.no_grad()
+    def fit_values(self, mask: Tensor, obs: Tensor, values: Tensor) -> None:
+        """``Q_k(s, a) ~ values[p, n, a]`` on the states ``obs [N, D]``, for the slots in
+        ``mask [P, K]``: each chosen network's output layer becomes the least-squares fit in its
+        own last hidden layer (the hidden layers keep their initial weights).
+
+        The neural counterpart of :func:`~skillchain_torch.discovery.gestation.
+        initialise_option_policies`: a joining option's policy starts as the agent's own
+        (``policy_start="top-level"``).
+
+        Example:
+            >>> head = MLPOptionQHead(population=1, slots=2, hidden=16, layers=1)
+            >>> obs = torch.rand(200, 4, dtype=torch.float64)
+            >>> values = torch.zeros(1, 200, 5, dtype=torch.float64)
+            >>> values[..., 3] = 10.0                                   # action 3 is the best
+            >>> head.fit_values(torch.tensor([[False, True]]), obs, values)
+            >>> head(obs[:1].expand(1, 4))[0].argmax(-1).tolist()      # slot 0 untouched: ties
+            [0, 3]
+        """
+        m = check_slot_mask(mask, self.population, self.slots)
+        layers = self._layers()
+        for p, k in m.nonzero().tolist():  # each network alone: no population effect
+            x = obs.to(self._dtype) * 2.0 - 1.0  # as _values: [0, 1] -> [-1, 1]
+            for weight, bias in layers[:-1]:  # weight [P, K, out, in]
+                x = torch.tanh(affine_rows(x, weight[p, k], bias[p, k]))
+            h = torch.cat([x, torch.ones_like(x[:, :1])], dim=-1).to(torch.float64)
+            fit = least_squares(h, values[p].to(h) / self.q_scale)  # [H + 1, A]
+            weight, bias = layers[-1]  # [P, K, A, H], [P, K, A]
+            weight[p, k] = fit[:-1].T.to(weight)
+            bias[p, k] = fit[-1].to(bias)
 
     def slot_tensors(self) -> dict[str, Tensor]:
         return {key: param.data for key, param in self.params.items()}

@@ -28,7 +28,7 @@ import torch
 from torch import Tensor, nn
 
 from skillchain_torch.features import FourierBasis
-from skillchain_torch.invariant import rowwise_dot
+from skillchain_torch.invariant import least_squares, rowwise_dot
 from skillchain_torch.options.status import agent_index, check_slot_mask, slot_mask
 
 NUM_ACTIONS = 5
@@ -273,6 +273,16 @@ class FourierOptionQHead(OptionQHead):
         delta = torch.zeros(mask.shape, dtype=rows.dtype, device=rows.device)
         delta[pi, ki] = delta_m
         return delta
+
+    @torch.no_grad()
+    def fit_values(self, mask: Tensor, obs: Tensor, values: Tensor) -> None:
+        """``Q_k(s, a) ~ values[p, n, a]`` on the states ``obs [N, D]`` for the slots in ``mask
+        [P, K]``: least squares in the basis (a policy copied from a top level that is not
+        linear in a Fourier basis, ``policy_start="top-level"``)."""
+        mask = check_slot_mask(mask, self.population, self.slots)
+        phi = self.basis(obs.to(self.weight))
+        for p, k in mask.nonzero().tolist():
+            self.weight[p, k] = least_squares(phi, values[p].to(phi)).T.to(self.weight)
 
     def slot_tensors(self) -> dict[str, Tensor]:
         return {"weight": self.weight}

@@ -117,7 +117,7 @@ def test_bad_starts_are_refused_by_name():
         SkillChaining(bank, policy_start="copy")
     with pytest.raises(ValueError, match="value_start must be one of max-sample, agent"):
         SkillChaining(bank, value_start="best")
-    with pytest.raises(ValueError, match="needs the agent's Fourier basis"):
+    with pytest.raises(ValueError, match="needs the agent's top-level features"):
         SkillChaining(bank, policy_start="top-level")  # no top_basis
     with pytest.raises(ValueError, match="policy_start must be one of"):
         TrainConfig(agent="skill-chaining", policy_start="copy").validate()

@@ -186,8 +186,11 @@ def test_the_config_names_the_pieces_and_refuses_unknown_ones():
     trainer.train()
     with pytest.raises(ValueError, match=r"^top_head must be one of fourier, mlp, got 'rnn'$"):
         TrainConfig(agent="skill-chaining", preset="paper", top_head="rnn").validate()
-    with pytest.raises(ValueError, match="needs policy_start 'zero'.*--preset paper$"):
-        TrainConfig(agent="skill-chaining", top_head="mlp").validate()
+    TrainConfig(agent="skill-chaining", top_head="mlp", option_head="mlp").validate()
+    with pytest.raises(ValueError, match="'top-level-shifted' needs Fourier heads.*"
+                                         "--policy-start top-level$"):  # fmt: skip
+        TrainConfig(agent="skill-chaining", top_head="mlp",
+                    policy_start="top-level-shifted").validate()
 
 
 def test_register_piece_adds_a_name_the_config_accepts():

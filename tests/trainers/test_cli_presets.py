@@ -216,13 +216,18 @@ def test_subgoals_random_reaches_the_agent_and_a_bad_value_is_one_line(capsys):
     assert "invalid choice: 'nearby'" in capsys.readouterr().err
 
 
-def test_a_neural_option_head_under_the_default_names_the_flag_that_fixes_it(capsys, tmp_path):
-    """Issue 53: the default starts options from the top level in the Fourier option basis, so
-    an MLP option head needs --policy-start zero, and the error says so in one line."""
+def test_neural_heads_take_the_default_and_the_shifted_start_names_the_flag(capsys, tmp_path):
+    """Issue 53: the default's two starts are fitted in a neural head's last layer, so MLP
+    heads train under the default; only the shifted start, which reads the linear values,
+    refuses them, in one line naming the flag that fixes it."""
+    assert main(["train", "--agent", "skill-chaining", "--map", "pinball_box", "--top-head",
+                 "mlp", "--option-head", "mlp", "--runs", "1", "--episodes", "1",
+                 "--max-episode-steps", "50", "--quiet", "--out", str(tmp_path / "run")]) == 0
+    agent = SkillChainingAgent.build(1, option_head="mlp", top_head="mlp", order=1)
+    assert (agent.discovery.policy_start, agent.discovery.value_start) == ("top-level", "agent")
     with pytest.raises(SystemExit):
-        main(["train", "--agent", "skill-chaining", "--option-head", "mlp", "--runs", "1",
-              "--episodes", "1", "--out", str(tmp_path / "run")])  # fmt: skip
+        main(["train", "--agent", "skill-chaining", "--option-head", "mlp", "--policy-start",
+              "top-level-shifted", "--runs", "1", "--episodes", "1",
+              "--out", str(tmp_path / "shifted")])  # fmt: skip
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "add --policy-start zero" in err
-    with pytest.raises(ValueError, match=r"--policy-start zero"):
-        SkillChainingAgent.build(1, option_head="mlp", order=1)
+    assert err.count("\n") == 0 and "use --policy-start top-level" in err

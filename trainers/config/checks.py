@@ -201,12 +201,12 @@ def check_values(config) -> None:
             ("top_head", TOP_HEADS), ("option_head", OPTION_HEADS),
             ("initiation", INITIATIONS), ("subgoals", SUBGOALS))),
     ]
-    if config.agent == "skill-chaining" and config.top_head != "fourier" and (
-            config.policy_start != "zero" or config.value_start == "agent"):  # fmt: skip
-        raise ConfigError(f"top_head {config.top_head!r} needs policy_start 'zero' and a "
-                          f"value_start other than 'agent' (they read the linear head), got "
-                          f"{config.policy_start!r} and {config.value_start!r}: add --preset "
-                          "paper", ("top_head", "policy_start", "value_start"))  # fmt: skip
+    if config.agent == "skill-chaining" and config.policy_start == "top-level-shifted" and (
+            "fourier" != config.top_head or "fourier" != config.option_head):  # fmt: skip
+        raise ConfigError(f"policy_start 'top-level-shifted' needs Fourier heads (its shift reads "
+                          f"the linear values), got top_head {config.top_head!r} and "
+                          f"option_head {config.option_head!r}: use --policy-start top-level",
+                          ("policy_start", "top_head", "option_head"))  # fmt: skip
     if config.agent == "skill-chaining" and config.goal is None and env_goal(config.env) is None:
         raise ConfigError(f"env {config.env} terminates only in failure (its last reward is "
                           "positive too), so no termination is a goal for skill chaining: pass "
@@ -217,12 +217,6 @@ def check_values(config) -> None:
             goal_event(config.goal)
         except ValueError as err:
             raise ConfigError(str(err), ("goal",)) from None
-    if config.agent == "skill-chaining" and config.option_head != "fourier" and (
-            config.policy_start != "zero"):  # fmt: skip
-        raise ConfigError(f"option_head {config.option_head!r} needs policy_start 'zero' (the "
-                          f"copy of the top level is made in the Fourier option basis), got "
-                          f"{config.policy_start!r}: add --policy-start zero",
-                          ("option_head", "policy_start"))  # fmt: skip
     if config.options_agent is not None:
         checks.append(("options_agent", config.options_agent, config.options_agent >= 0, ">= 0"))
     if config.alpha is not None:
