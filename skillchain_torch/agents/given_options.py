@@ -139,6 +139,7 @@ class GivenOptionsAgent(HierarchicalAgent):
                          intra_option_target=cfg.intra_option_target,
                          interruption=cfg.option_interruption,
                          end_outside_set=cfg.end_outside_set,
+                         max_option_steps=cfg.max_option_steps,
                          overlap=True,  # as the options were learned (no-op if unrelated)
                          completion_reward=cfg.completion_reward, native=native,
                          events=(goal_event(cfg.goal or env_goal(cfg.env)),))  # (None: terminated)

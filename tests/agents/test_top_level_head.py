@@ -101,7 +101,8 @@ def test_a_neural_top_level_head_learns_inside_skill_chaining():
 
 
 def test_starts_that_read_linear_weights_name_the_head():
-    with pytest.raises(ValueError, match="value_start='agent'.*MLPValueHead cannot take.*no fit_values.*max-sample"):
+    with pytest.raises(ValueError, match="value_start='agent'.*MLPValueHead cannot take.*"
+                                         "no fit_values.*max-sample"):  # fmt: skip
         SkillChainingAgent(OptionBank.build(1, 2, order=1), order=1,
                            q_head=MLPValueHead(1, 7), features=nn.Identity(),
                            value_start="agent")  # fmt: skip

@@ -231,3 +231,27 @@ def test_neural_heads_take_the_default_and_the_shifted_start_names_the_flag(caps
               "--out", str(tmp_path / "shifted")])  # fmt: skip
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "use --policy-start top-level" in err
+
+
+def test_the_option_time_limit_is_a_flag_that_reaches_both_option_agents(tmp_path, capsys):
+    """Section 5.1's 250-step limit, changeable (issue 53's run on the cause of the neural gap):
+    --max-option-steps reaches the skill-chaining and given-options agents, 0 is refused in one
+    line, and a saved config from before the field ran with 250."""
+    assert config_of("--agent", "skill-chaining").max_option_steps == DEFAULT.max_option_steps
+    cfg = TrainConfig(agent="skill-chaining", map="pinball_box", runs=1, episodes=1,
+                      max_episode_steps=30, max_option_steps=50)
+    trainer = PopulationTrainer(cfg, out_dir=tmp_path / "sc")
+    trainer.train()
+    assert trainer.agent.max_option_steps == 50
+    assert trainer.agent.discovery.max_option_steps == 50
+    trainer.agent.bank.save(tmp_path / "options.pt")
+    given = TrainConfig(agent="given-options", map="pinball_box", runs=1, episodes=1,
+                        max_episode_steps=30, max_option_steps=7,
+                        options=str(tmp_path / "options.pt"))
+    assert PopulationTrainer(given).agent.max_option_steps == 7
+    with pytest.raises(SystemExit):
+        main(["train", "--agent", "skill-chaining", "--max-option-steps", "0", "--out",
+              str(tmp_path / "bad")])
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "max_option_steps must be >= 1, got 0" in err
+    assert LEGACY_FIELDS["max_option_steps"] == 250 == PAPER.max_option_steps

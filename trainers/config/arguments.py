@@ -31,7 +31,7 @@ CONFIG_OPTIONS = (
     "keep_negatives", "store_failures", "constrain_nearest", "intra_option_primitives",
     "intra_option_target", "option_interruption", "end_outside_set", "policy_start",
     "value_start", "value_bonus", "option_alpha", "completion_reward", "gestation",
-    "convergence_threshold", "max_branching", "subgoals", "goal",
+    "max_option_steps", "convergence_threshold", "max_branching", "subgoals", "goal",
     *NEURAL_OPTIONS,
 )  # fmt: skip
 
@@ -309,7 +309,8 @@ TRAIN_GROUPS = (
       "completion_reward", "intra_option_primitives", "intra_option_target",
       "option_interruption", "end_outside_set", "options", "options_agent")),
     ("discovery", "skill chaining: options, their initiation sets, gestation",
-     ("slots", "max_branching", "subgoals", "gestation", "convergence_threshold",
+     ("slots", "max_branching", "subgoals", "gestation", "max_option_steps",
+      "convergence_threshold",
       "option_alpha", "policy_start", "value_start", "value_bonus", "initiation_bias",
       "initiation_centered", "gestation_positives", "initiation_start",
       "initiation_constrain", "one_class_fits", "keep_negatives", "store_failures",

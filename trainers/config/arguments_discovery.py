@@ -149,6 +149,13 @@ def add_discovery_arguments(parser: argparse.ArgumentParser) -> None:
         help="episodes a new option gestates before it can be chosen" + _presets("gestation"),
     )
     parser.add_argument(
+        "--max-option-steps",
+        type=int,
+        default=None,
+        help="an option's execution gives up after this many steps, a failure"
+        + _presets("max_option_steps"),
+    )
+    parser.add_argument(
         "--convergence-threshold",
         type=float,
         default=None,

@@ -175,6 +175,7 @@ def check_values(config) -> None:
         ("value_bonus", config.value_bonus, math.isfinite(config.value_bonus), "finite"),
         ("gestation", config.gestation, 0 <= config.gestation <= 1_000_000, "in [0, 10^6]"),
         ("max_branching", config.max_branching, config.max_branching >= 0, ">= 0"),
+        ("max_option_steps", config.max_option_steps, config.max_option_steps >= 1, ">= 1"),
         ("convergence_threshold", config.convergence_threshold,
          math.isfinite(config.convergence_threshold) and config.convergence_threshold > 0,
          "finite and > 0"),

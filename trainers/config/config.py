@@ -130,6 +130,8 @@ class TrainConfig:
             (the paper does not give it; 10,000 is the task's goal reward).
         value_start, value_bonus: (preset) how ``Q(s, o)`` starts when an option joins (see
             :class:`~skillchain_torch.discovery.SkillChaining`).
+        max_option_steps: (preset) an execution gives up after this many steps (paper: 250,
+            section 5.1), and counts as a failure.
         gestation: (preset) episodes a new option gestates before it joins the repertoire
             (paper: 10; default 2, ``results/chain-growth/``).
         convergence_threshold: (preset) an initiation set is learned (and becomes a target
@@ -204,6 +206,7 @@ class TrainConfig:
     value_start: str | None = None
     value_bonus: float | None = None
     gestation: int | None = None
+    max_option_steps: int | None = None
     convergence_threshold: float | None = None
     max_branching: int | None = None
     subgoals: str | None = None

@@ -10,7 +10,8 @@ __all__ = ["LABEL_FIELDS", "LEGACY_FIELDS", "MLP_TOP_FIELDS", "RESUME_FIELDS", "
 
 # Fields added after runs were published, with the behaviour every run before them had: a
 # saved config without one of them ran with this value (whatever today's default is).
-LEGACY_FIELDS = {"preset": "default", "failure_bootstrap": "decision", "keep_negatives": False,
+LEGACY_FIELDS = {"preset": "default", "max_option_steps": 250, "failure_bootstrap": "decision",
+                 "keep_negatives": False,
                  "policy_start": "zero", "value_start": "max-sample", "value_bonus": 0.0,
                  "option_alpha": 0.0005,
                  "completion_reward": 10_000.0, "gestation": 10, "convergence_threshold": 0.15,
@@ -44,6 +45,7 @@ _PIECES = ("top_head", "option_head", "initiation", *MLP_TOP_FIELDS, "epsilon_in
            "annealing_steps")
 UNREAD_FIELDS = {
     "flat": _DISCOVERY_FIELDS + _PIECES + ("options", "options_agent", "failure_bootstrap", "goal",
+                                           "max_option_steps",
                                            "completion_reward", "intra_option_primitives",
                                            "intra_option_target",
                                            "option_interruption", "end_outside_set"),
