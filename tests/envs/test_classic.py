@@ -192,8 +192,10 @@ class InterruptAt:
 
 @pytest.mark.parametrize("env", [ID, ACROBOT])
 def test_a_run_on_it_resumes_bit_for_bit(tmp_path, env):
+    # (Acrobot's episodes are cut at 150 steps: 500 each took most of a minute, and a restart
+    # on a time limit is resumed the same way)
     config = TrainConfig(agent="skill-chaining", env=env, runs=3, episodes=6, seed=2,
-                         checkpoint_every=3)  # fmt: skip
+                         checkpoint_every=3, max_episode_steps=150)  # fmt: skip
     reference = PopulationTrainer(config).train()
     interrupted = PopulationTrainer(config, out_dir=tmp_path)
     interrupted.register_op("post_checkpoint", InterruptAt())
