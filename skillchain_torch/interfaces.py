@@ -156,8 +156,10 @@ class ValueHead(Protocol):
     # Optional, for the default preset's ``value_start="agent"`` (``policy_start="top-level"``
     # asks the same of the option head): ``fit_values(mask [P, D], phi [N, F], values [P, N,
     # D])`` fits ``Q(s, d)`` to ``values`` on the states ``phi`` for the ``(p, d)`` in ``mask``
-    # (MLPQHead, MLPOptionQHead and FourierOptionQHead have it; without it, only
-    # ``value_start="max-sample"`` and ``policy_start="zero"``, the paper's, take the head).
+    # (MLPQHead, MLPOptionQHead and FourierOptionQHead have it). Both starts also read the
+    # agent's values on the grid one agent at a time, through ``select_agents(index)`` (a head
+    # of those agents). Without them, only ``value_start="max-sample"`` and
+    # ``policy_start="zero"``, the paper's, take the head.
 
     def parameters(self, recurse: bool = True):
         """What an optimizer trains (``nn.Module``'s); the built-in linear head has none and

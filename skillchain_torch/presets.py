@@ -139,8 +139,8 @@ class Preset:
 
     Fields named as :class:`~skillchain_torch.trainers.TrainConfig`'s (and so as the flags of
     ``skillchain train``); the others (``option_order``, ``option_epsilon``,
-    ``max_option_steps``, ``max_branching``, ``convergence_episodes``, ``overlap``,
-    ``balanced``, ``capacity``, ``distance``, ``degree``, ``lr``, ``sweeps``) only through
+    ``convergence_episodes``, ``overlap``, ``balanced``, ``capacity``, ``distance``,
+    ``degree``, ``lr``, ``sweeps``) only through
     :meth:`SkillChainingAgent.build`. ``order`` / ``alpha`` ``None``: the paper's value for
     the map (:func:`instance_defaults`); ``slots`` ``None``: the library's for the map
     (:func:`instance_slots`).

@@ -912,10 +912,23 @@ class SkillChainingAgent(HierarchicalAgent):
         # Two starts read the agent's values: the linear head's weights in its Fourier basis,
         # or any head's values on a grid of states, which the written head fits (fit_values).
         linear = self.closed_form and type(self.features) is FourierBasis
-        if value_start == "agent" and not (linear or hasattr(self.q_head, "fit_values")):
+        name = type(self.q_head).__name__
+        # (a head's values on the grid are read per agent: select_agents, or the linear weights)
+        readable = isinstance(self.q_head, LinearQHead) or hasattr(self.q_head, "select_agents")
+        if value_start == "agent" and not (linear or (
+                readable and hasattr(self.q_head, "fit_values"))):  # fmt: skip
             raise ValueError(f"value_start='agent' fits the agent's own values in the top head, "
-                             f"which {type(self.q_head).__name__} cannot take (it has no "
-                             "fit_values): use value_start='max-sample' (the paper's)")
+                             f"which {name} cannot take (it needs fit_values and "
+                             "select_agents): use value_start='max-sample' (the paper's)")
+        if policy_start != "zero" and not readable:
+            raise ValueError(f"policy_start={policy_start!r} copies the agent's values into an "
+                             f"option, which needs them read from {name} (select_agents): use "
+                             "policy_start='zero' (the paper's)")
+        if policy_start == "top-level-shifted" and not (
+                linear and getattr(bank.q_head, "basis", None) is not None):  # fmt: skip
+            raise ValueError("policy_start='top-level-shifted' reads the linear values (a "
+                             "LinearQHead over a FourierBasis, Fourier option heads): use "
+                             "policy_start='top-level'")
         self.discovery = self.rules(
             self.bank, self.events, gestation=gestation, max_branching=max_branching,
             convergence_threshold=convergence_threshold,

@@ -211,7 +211,8 @@ class MLPOptionQHead(OptionQHead):
     def fit_values(self, mask: Tensor, obs: Tensor, values: Tensor) -> None:
         """``Q_k(s, a) ~ values[p, n, a]`` on the states ``obs [N, D]``, for the slots in
         ``mask [P, K]``: each chosen network's output layer becomes the least-squares fit in its
-        own last hidden layer (the hidden layers keep their initial weights).
+        own last hidden layer (the hidden layers stay as they are: as initialised, or as
+        gestation's off-policy updates left them).
 
         The neural counterpart of :func:`~skillchain_torch.discovery.gestation.
         initialise_option_policies`: a joining option's policy starts as the agent's own

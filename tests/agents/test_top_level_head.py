@@ -12,8 +12,9 @@ from torch import nn
 
 import skillchain_torch.objectives.smdp_sarsa_loss as smdp_sarsa_loss
 from skillchain_torch.agents import HierarchicalAgent, SkillChainingAgent
+from skillchain_torch.features import FourierBasis
 from skillchain_torch.interfaces import ValueHead, missing_methods
-from skillchain_torch.modules import LinearQHead
+from skillchain_torch.modules import LinearQHead, MLPQHead
 from skillchain_torch.options import OptionBank
 from skillchain_torch.trainers import PopulationTrainer, TrainConfig
 
@@ -102,10 +103,21 @@ def test_a_neural_top_level_head_learns_inside_skill_chaining():
 
 def test_starts_that_read_linear_weights_name_the_head():
     with pytest.raises(ValueError, match="value_start='agent'.*MLPValueHead cannot take.*"
-                                         "no fit_values.*max-sample"):  # fmt: skip
+                                         "needs fit_values and select_agents.*max-sample"):
         SkillChainingAgent(OptionBank.build(1, 2, order=1), order=1,
                            q_head=MLPValueHead(1, 7), features=nn.Identity(),
                            value_start="agent")  # fmt: skip
+    # the policy copy reads the agent's values one agent at a time: refused at construction,
+    # not at the first join
+    with pytest.raises(ValueError, match="policy_start='top-level'.*MLPValueHead "
+                                         r"\(select_agents\).*'zero'"):  # fmt: skip
+        SkillChainingAgent(OptionBank.build(1, 2, order=1), order=1,
+                           q_head=MLPValueHead(1, 7), features=nn.Identity(),
+                           value_start="max-sample", policy_start="top-level")  # fmt: skip
+    with pytest.raises(ValueError, match="'top-level-shifted' reads the linear values"):
+        SkillChainingAgent(OptionBank.build(1, 2, order=1), order=2,
+                           q_head=MLPQHead(81, 7, 1), features=FourierBasis(4, 2),
+                           value_start="max-sample", policy_start="top-level-shifted")
 
 
 def test_compiled_path_refuses_a_user_head_by_name():

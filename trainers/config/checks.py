@@ -106,6 +106,9 @@ def memory_estimate(config) -> list[tuple[tuple[str, ...], str, int, bool]]:
         per_slot = 5 * 256 * 8 + 500 * (4 * 8 + 1) + 15 * 8
         terms.append((("runs", "slots"), "option banks [runs, slots, ...]",
                       runs * int(config.slots) * per_slot, True))
+        # the states of each agent's execution, kept for its outcome (ExecutionTrace)
+        terms.append((("runs", "max_option_steps"), "execution traces [runs, max_option_steps, "
+                       "obs dims]", runs * int(config.max_option_steps) * (dim + 1) * 8, True))
     return terms
 
 
@@ -175,7 +178,8 @@ def check_values(config) -> None:
         ("value_bonus", config.value_bonus, math.isfinite(config.value_bonus), "finite"),
         ("gestation", config.gestation, 0 <= config.gestation <= 1_000_000, "in [0, 10^6]"),
         ("max_branching", config.max_branching, config.max_branching >= 0, ">= 0"),
-        ("max_option_steps", config.max_option_steps, config.max_option_steps >= 1, ">= 1"),
+        ("max_option_steps", config.max_option_steps,
+         1 <= config.max_option_steps <= 1_000_000, "in [1, 10^6]"),
         ("convergence_threshold", config.convergence_threshold,
          math.isfinite(config.convergence_threshold) and config.convergence_threshold > 0,
          "finite and > 0"),
