@@ -25,10 +25,11 @@ $(VENV)/.installed: $(VENV)/.installed-run
 .PHONY: install test demo lint bench docs
 install: $(VENV)/.installed
 
-# -n auto: one pytest worker per core (pytest-xdist); --dist loadfile keeps a file's tests, and
-# its module fixtures, on one worker. The suite took 18 minutes on one core of CI's two.
+# -n auto: one pytest worker per core (pytest-xdist, each worker's torch at one thread:
+# tests/conftest.py); --dist worksteal: an idle worker takes tests queued on the other. The
+# suite took 18 minutes on one core of CI's two.
 test: $(VENV)/.installed
-	$(PY) -m pytest -n auto --dist loadfile
+	$(PY) -m pytest -n auto --dist worksteal
 
 lint: $(VENV)/.installed
 	$(VENV)/bin/ruff check .

@@ -9,6 +9,14 @@ import pytest
 
 matplotlib.use("Agg")
 
+if os.environ.get("PYTEST_XDIST_WORKER"):  # make test: one pytest worker per core
+    import torch
+
+    # torch's own intra-op threads, one per core in every worker, would oversubscribe the
+    # cores (OpenMP threads spin while they wait); the commands the tests start inherit it
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    torch.set_num_threads(1)
+
 
 def _origin() -> Path | None:
     """The checkout this one was cloned from, when that is a local path (a scratch clone of a

@@ -254,7 +254,7 @@ def fitted_starts(join: Tensor, q_head, option_head, features, grid: Tensor,
         >>> fitted_starts(torch.tensor([[False, True]]), top, opt, torch.nn.Identity(),
         ...               fit_grid(4), 5, value_bonus=5.0, policy=True)
         >>> s = torch.full((1, 4), 0.4, dtype=torch.float64)
-        >>> round(float(top(s)[0, 6]), 3), opt(s)[0, 1].argmax().item()
+        >>> round(float(top(s).detach()[0, 6]), 3), opt(s)[0, 1].argmax().item()
         (35.0, 2)
     """
     phi = features(grid)

@@ -220,9 +220,9 @@ def test_neural_heads_take_the_default_and_the_shifted_start_names_the_flag(caps
     """Issue 53: the default's two starts are fitted in a neural head's last layer, so MLP
     heads train under the default; only the shifted start, which reads the linear values,
     refuses them, in one line naming the flag that fixes it."""
-    assert main(["train", "--agent", "skill-chaining", "--map", "pinball_box", "--top-head",
-                 "mlp", "--option-head", "mlp", "--runs", "1", "--episodes", "1",
-                 "--max-episode-steps", "50", "--quiet", "--out", str(tmp_path / "run")]) == 0
+    cfg = config_of("--agent", "skill-chaining", "--top-head", "mlp", "--option-head", "mlp")
+    assert (cfg.policy_start, cfg.value_start) == ("top-level", "agent")
+    cfg.validate(memory=False)  # (tests/neural/test_neural_starts.py trains under it)
     agent = SkillChainingAgent.build(1, option_head="mlp", top_head="mlp", order=1)
     assert (agent.discovery.policy_start, agent.discovery.value_start) == ("top-level", "agent")
     with pytest.raises(SystemExit):
