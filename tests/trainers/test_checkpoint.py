@@ -315,3 +315,42 @@ def test_fuzz_checkpoint_reader_on_corrupted_files(straight, tmp_path, cut, flip
     path = tmp_path / "ckpt_000002.pt"
     path.write_bytes(bytes(data))
     _read_outcome(path, original)
+
+
+def test_checkpoints_by_the_clock_change_no_bit_and_resume_bit_for_bit(tmp_path):
+    """checkpoint_minutes writes checkpoints between episode counts (here at every batch that
+    ends an episode, the clock's threshold at 0.0001 minutes): the run is the same, and one
+    interrupted after such a checkpoint resumes to the same arrays."""
+    from skillchain_torch.trainers.outputs.checkpoint import latest_checkpoint, load_checkpoint
+
+    def config(minutes):
+        return TrainConfig(agent="skill-chaining", map="pinball_box", runs=3, episodes=4,
+                           seed=5, max_episode_steps=200, gestation=1, checkpoint_every=0,
+                           checkpoint_minutes=minutes)  # fmt: skip
+
+    reference = PopulationTrainer(config(0.0), out_dir=tmp_path / "plain").train()
+    assert sorted(p.name for p in (tmp_path / "plain" / "checkpoints").glob("*.pt")) == [
+        "ckpt_000004.pt"]  # the final one only
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def stop_at_third(trainer, path):
+        seen.append(path)
+        if len(seen) == 3:
+            raise Stop
+
+    clocked = PopulationTrainer(config(1e-4), out_dir=tmp_path / "clocked")
+    clocked.register_op("post_checkpoint", stop_at_third)
+    with pytest.raises(Stop):
+        clocked.train()
+    assert int(clocked.episodes_done.min()) < 4  # stopped mid-run, between episode counts
+    resumed = PopulationTrainer(config(1e-4), out_dir=tmp_path / "clocked")
+    load_checkpoint(latest_checkpoint(tmp_path / "clocked"), resumed)
+    resumed.train()
+    assert np.array_equal(resumed.returns, reference.returns)
+    assert np.array_equal(resumed.lengths, reference.lengths)
+    whole = PopulationTrainer(config(1e-4), out_dir=tmp_path / "whole").train()
+    assert np.array_equal(whole.returns, reference.returns)

@@ -25,7 +25,8 @@ __all__ = ["build_parser", "CONFIG_OPTIONS"]
 # Options that define the run; with --resume the saved config is used instead.
 CONFIG_OPTIONS = (
     "agent", "preset", "map", "env", "obs_bounds", "runs", "episodes", "seed", "alpha", "epsilon",
-    "gamma", "order", "scale_step_size", "max_episode_steps", "checkpoint_every", "options",
+    "gamma", "order", "scale_step_size", "max_episode_steps", "checkpoint_every",
+    "checkpoint_minutes", "options",
     "options_agent", "slots", "initiation_bias", "initiation_centered", "gestation_positives",
     "initiation_start", "initiation_constrain", "one_class_fits", "failure_bootstrap",
     "keep_negatives", "store_failures", "constrain_nearest", "intra_option_primitives",
@@ -142,6 +143,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="checkpoint every N episodes of the slowest agent (default 25)",
+    )
+    train.add_argument(
+        "--checkpoint-minutes",
+        type=float,
+        default=None,
+        help="also checkpoint when M minutes of training passed since the last one, 0: never "
+        "(default 30)",
     )
     train.add_argument("--device", default=None, help="torch device (default cpu)")
     train.add_argument(
@@ -319,7 +327,8 @@ TRAIN_GROUPS = (
      ("top_head", "option_head", "initiation", "top_lr", "top_target_update",
       "top_bootstrap", "epsilon_init", "annealing_steps")),
     ("output", "where results go, resuming, and how the run computes",
-     ("out", "resume", "overwrite", "checkpoint_every", "quiet", "device", "threads",
+     ("out", "resume", "overwrite", "checkpoint_every", "checkpoint_minutes", "quiet", "device",
+      "threads",
       "torch_only", "workers", "block_size", "ray_address")),
 )
 _PLAIN_DEFAULTS = {"env": "none: Pinball", "obs_bounds": "the env's spec", "out": "none; "

@@ -166,6 +166,9 @@ class TrainConfig:
             throughout, as the paper.
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).
+        checkpoint_minutes: also write one when this many minutes of training have passed since
+            the last (0: never), so a killed run loses at most that much whatever its episodes'
+            lengths (hard Pinball's first episodes take an agent tens of minutes).
         device: torch device of the run.
     """
 
@@ -182,6 +185,7 @@ class TrainConfig:
     scale_step_size: bool | None = None
     max_episode_steps: int | None = None
     checkpoint_every: int = 25
+    checkpoint_minutes: float = 30.0
     device: str = "cpu"
     options: str | None = None
     options_agent: int | None = 0

@@ -222,6 +222,7 @@ class PopulationTrainer:
         self._clock = time.perf_counter()
         self._training = False
         self._next_checkpoint = config.checkpoint_every or None
+        self._checkpoint_wall = 0.0  # wall_time at the last checkpoint (checkpoint_minutes)
         self._ops: dict[str, list[tuple[str, object]]] = {stage: [] for stage in STAGES}
         self._modules: dict[str, object] = {}
         self._pending_modules: dict[str, dict] = {}  # loaded before their module registered
@@ -351,11 +352,17 @@ class PopulationTrainer:
         episode_batch = EpisodeBatch(agents, episodes, returns, lengths, term,
                                      after if after > before else None, batch)
         self._call("post_episodes", episode_batch)
+        minutes = self.config.checkpoint_minutes
         if self._next_checkpoint is not None and after >= self._next_checkpoint:
             self._next_checkpoint = after + self.config.checkpoint_every
             if self.num_active > 0 and self.out_dir is not None:
                 self._tick()
                 self.save_checkpoint()
+        elif (minutes and self.num_active > 0 and self.out_dir is not None
+              and self.wall_time - self._checkpoint_wall >= 60.0 * minutes):  # fmt: skip
+            # by the clock (between steps, as the episode checkpoints): no bit depends on it
+            self._tick()
+            self.save_checkpoint()
 
     def _finish(self) -> None:
         self.stepper.sync()
@@ -393,6 +400,7 @@ class PopulationTrainer:
         path = self.checkpoint_path() if path is None else Path(path)
         self.check_learners()  # never a checkpoint of diverged weights
         save_checkpoint(self, path)
+        self._checkpoint_wall = self.wall_time
         self._call("post_checkpoint", path)
         return path
 
@@ -440,6 +448,7 @@ class PopulationTrainer:
         self.elapsed = float(t["elapsed"])
         self._finalized = False
         self._next_checkpoint = t["next_checkpoint"]
+        self._checkpoint_wall = self.elapsed  # (the clock restarts from the loaded run's)
         self._pending_modules = {}
         for name, saved in state["modules"].items():
             if name in self._modules:

@@ -171,8 +171,9 @@ def read_checkpoint(path: str | Path) -> dict:
 def load_checkpoint(path: str | Path, trainer) -> None:
     """Restore ``trainer`` from ``path``; its config must match the checkpoint's.
 
-    Only ``checkpoint_every`` and ``device`` may differ. A mismatch (e.g. another map, number
-    of runs or seed) raises ``ValueError`` naming the file and the field.
+    Only ``checkpoint_every``, ``checkpoint_minutes`` and ``device`` may differ. A mismatch
+    (e.g. another map, number of runs or seed) raises ``ValueError`` naming the file and the
+    field.
     """
     _restore(read_checkpoint(path), path, trainer)
 
