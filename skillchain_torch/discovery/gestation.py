@@ -54,7 +54,7 @@ from skillchain_torch.invariant import rowwise_dot
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.options import OptionBank, OptionStatus
 
-__all__ = ["GESTATION_EPISODES", "POLICY_STARTS", "VALUE_STARTS", "StateValueFit",
+__all__ = ["GESTATION_EPISODES", "POLICY_STARTS", "VALUE_STARTS", "StateValueFit", "box_grid",
            "cached_projection", "fit_grid", "fitted_starts", "grid_values", "gestation_over",
            "initialise_option_policies",
            "initialise_option_values", "state_value_fit", "value_projection"]
@@ -114,6 +114,23 @@ def grid_points(dim: int) -> int:
     return 7 if dim <= 4 else 3
 
 
+def box_grid(dim: int, points: int, low: tuple[float, ...] | None = None,
+             high: tuple[float, ...] | None = None, dtype: torch.dtype = torch.float64,
+             device: torch.device | str | None = None) -> Tensor:  # fmt: skip
+    """``[points ** dim, dim]``: the regular grid over the box ``[low, high]`` (default: the
+    :func:`observation_box`), ``points`` a dim, the last dim varying fastest: the states every
+    least-squares start here is fitted on.
+
+    Example:
+        >>> box_grid(2, 3, low=(0.0, 0.0), high=(1.0, 2.0))[:4].tolist()
+        [[0.0, 0.0], [0.0, 1.0], [0.0, 2.0], [0.5, 0.0]]
+    """
+    box = observation_box(dim)
+    low, high = box[0] if low is None else low, box[1] if high is None else high
+    axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
+    return torch.cartesian_prod(*axes).reshape(-1, dim).to(device)
+
+
 def value_projection(top: FourierBasis, option: FourierBasis, points: int | None = None,
                      low: tuple[float, ...] | None = None,
                      high: tuple[float, ...] | None = None) -> Tensor:  # fmt: skip
@@ -139,8 +156,7 @@ def value_projection(top: FourierBasis, option: FourierBasis, points: int | None
         raise ValueError(f"value_projection needs bases of one dimension matching low/high "
                          f"and points >= 2, got dims {top.dim}, {option.dim}, points {points}")
     dtype = top.coefficients.dtype
-    axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
-    grid = torch.cartesian_prod(*axes).reshape(-1, top.dim).to(top.coefficients.device)
+    grid = box_grid(top.dim, points, low, high, dtype, top.coefficients.device)
     pinv, phi_top = torch.linalg.pinv(option(grid)), top(grid).T.contiguous()  # [Fo, N], [Ft, N]
     # pinv (an SVD) and rowwise_dot give the same bits on every call; lstsq and matmul did not
     # (their rounding varies with the call and the operands' addresses). One option feature
@@ -218,9 +234,7 @@ def fit_grid(dim: int, dtype: torch.dtype = torch.float64,
         (torch.Size([2116, 2]), torch.Size([2401, 4]))
     """
     points = max(3, math.ceil(FIT_STATES ** (1.0 / dim) - 1e-9))
-    low, high = observation_box(dim)
-    axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
-    return torch.cartesian_prod(*axes).reshape(-1, dim).to(device)
+    return box_grid(dim, points, dtype=dtype, device=device)
 
 
 @torch.no_grad()
@@ -290,11 +304,8 @@ class StateValueFit:
     def __init__(self, basis: FourierBasis, points: int | None = None,
                  low: tuple[float, ...] | None = None,
                  high: tuple[float, ...] | None = None):  # fmt: skip
-        box, points = observation_box(basis.dim), points or grid_points(basis.dim)
-        low, high = box[0] if low is None else low, box[1] if high is None else high
-        dtype = basis.coefficients.dtype
-        axes = [torch.linspace(lo, hi, points, dtype=dtype) for lo, hi in zip(low, high)]
-        grid = torch.cartesian_prod(*axes).reshape(-1, basis.dim).to(basis.coefficients.device)
+        grid = box_grid(basis.dim, points or grid_points(basis.dim), low, high,
+                        basis.coefficients.dtype, basis.coefficients.device)
         self.phi = basis(grid)  # [N, F]
         self.pinv = torch.linalg.pinv(self.phi)  # [F, N]
 
