@@ -1,0 +1,151 @@
+"""Issue 53's fair comparison: neural skill chaining against neural flat, per 25-episode window,
+with 95% intervals over runs, and where neural flat plateaus by the issue's rule.
+
+    python results/neural/fair/report.py            # every ENV folder here with both arms
+    python results/neural/fair/report.py Acrobot-v1
+
+For each ``ENV/`` whose ``flat-neural`` and ``sc-neural`` (``bash results/neural/fair.sh ENV``)
+have ``returns.npy``, writes ``ENV/tables.md`` and ``ENV/curves.png``:
+
+* each arm's mean return per 25-episode window (95% Student-t interval over runs), the
+  windows in which neural flat's mean lies inside the previous window's interval marked ``=``
+  (the plateau rule: neural flat plateaus at the first such window);
+* skill chaining minus flat per window (Welch's 95% interval), and over the plateau window,
+  the windows after it, and the last 25 episodes;
+* options held at the end and how executions ended (per agent-episode, last 25 episodes).
+
+Example:
+    >>> rows = windows(300, 25)
+    >>> rows[0], rows[-1]
+    ((1, 25), (276, 300))
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci, t_quantile
+
+HERE = Path(__file__).resolve().parent
+ARMS = ("flat-neural", "sc-neural")
+WIDTH = 25
+
+
+def windows(episodes: int, width: int = WIDTH) -> list[tuple[int, int]]:
+    """1-based inclusive ``(first, last)`` episode windows of ``width`` covering ``episodes``."""
+    return [(a, a + width - 1) for a in range(1, episodes - width + 2, width)]
+
+
+def window_means(returns: np.ndarray, spans: list[tuple[int, int]]) -> list[np.ndarray]:
+    """Per run, the mean return over each window: ``[runs]`` arrays, one per span."""
+    return [returns[:, a - 1:b].mean(1) for a, b in spans]
+
+
+def plateau(returns: np.ndarray, spans: list[tuple[int, int]]) -> list[bool]:
+    """Per window, whether its mean lies inside the previous window's 95% t interval (the
+    issue's plateau rule; the first window never does)."""
+    means = window_means(returns, spans)
+    inside = [False]
+    for before, now in zip(means, means[1:]):
+        m, h = mean_ci(before)
+        inside.append(bool(abs(now.mean() - m) <= h))
+    return inside
+
+
+def fmt(mean: float, half: float, sign: bool = False) -> str:
+    return f"{mean:+,.0f} ± {half:,.0f}" if sign else f"{mean:,.0f} ± {half:,.0f}"
+
+
+def report(env: Path) -> list[str]:
+    runs = {arm: {name: np.load(env / arm / f"{name}.npy")
+                  for name in ("returns", "n_options", "option_outcomes")}
+            for arm in ARMS}  # fmt: skip
+    flat, sc = runs["flat-neural"]["returns"], runs["sc-neural"]["returns"]
+    episodes = min(flat.shape[1], sc.shape[1])
+    spans = windows(episodes)
+    flat_plateau = plateau(flat, spans)
+    first = next((i for i, hit in enumerate(flat_plateau) if hit), None)
+    head = "| arm | runs | " + " | ".join(f"{a}-{b}" for a, b in spans) + " |"
+    rule = "|---|---:|" + "---:|" * len(spans)
+    lines = [f"# {env.name}: neural skill chaining against neural flat", "",
+             "Mean return per 25-episode window, 95% t interval over runs; `=`: the mean lies "
+             "inside the previous window's interval (the plateau rule, read on neural flat).", "",
+             head, rule]  # fmt: skip
+    for arm in ARMS:
+        r = runs[arm]["returns"]
+        cells = [fmt(*mean_ci(m)) + (" =" if mark else "")
+                 for m, mark in zip(window_means(r, spans), plateau(r, spans))]
+        lines.append(f"| {arm} | {len(r)} | " + " | ".join(cells) + " |")
+    diffs = [diff_ci(s, f) for s, f in zip(window_means(sc, spans), window_means(flat, spans))]
+    lines += ["| sc - flat (Welch) | | " + " | ".join(fmt(d, h, True) for d, h in diffs) + " |",
+              ""]  # fmt: skip
+    if first is None:
+        lines.append(f"Neural flat does not plateau by the rule within {episodes} episodes.")
+    else:
+        a, b = spans[first]
+        after = (a, episodes)
+        d_after = diff_ci(sc[:, after[0] - 1:].mean(1), flat[:, after[0] - 1:].mean(1))
+        lines.append(f"Neural flat plateaus by the rule at episodes {a}-{b} (its mean inside "
+                     f"the interval of {spans[first - 1][0]}-{spans[first - 1][1]}). Skill "
+                     f"chaining minus flat over {after[0]}-{after[1]}: {fmt(*d_after, True)}.")
+    last = (episodes - WIDTH + 1, episodes)
+    d_last = diff_ci(sc[:, last[0] - 1:].mean(1), flat[:, last[0] - 1:].mean(1))
+    d_all = diff_ci(sc.mean(1), flat.mean(1))
+    lines += ["", f"Over the last {WIDTH} episodes: {fmt(*d_last, True)}; over all "
+              f"{episodes}: {fmt(*d_all, True)} (sc - flat, Welch 95%).", ""]  # fmt: skip
+    n_options = runs["sc-neural"]["n_options"]
+    outcomes = runs["sc-neural"]["option_outcomes"][:, last[0] - 1:]  # success, timeout, fail
+    per = outcomes.sum(1) / WIDTH  # per agent-episode, per run
+    cells = [fmt(*mean_ci(per[:, j])) for j in range(per.shape[1])]
+    lines += [f"Skill chaining at episode {episodes}: {fmt(*mean_ci(n_options[:, -1]))} options "
+              f"per agent (most {int(n_options[:, -1].max())}); executions per agent-episode "
+              f"over {last[0]}-{last[1]}: success {cells[0]}, timeout {cells[1]}, other "
+              f"failure {cells[2]}.", ""]  # fmt: skip
+    return lines
+
+
+def figure(env: Path, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for arm in ARMS:
+        x = np.load(env / arm / "returns.npy")
+        kernel = np.ones(10) / 10  # a 10-episode moving average, per run
+        smooth = np.array([np.convolve(row, kernel, mode="valid") for row in x])
+        m = smooth.mean(0)
+        h = t_quantile(0.975, len(smooth) - 1) * smooth.std(0, ddof=1) / np.sqrt(len(smooth))
+        e = np.arange(10, x.shape[1] + 1)
+        ax.plot(e, m, label=f"{arm} ({len(x)} runs)")
+        ax.fill_between(e, m - h, m + h, alpha=0.2)
+    ax.set_title(f"{env.name}: neural skill chaining (default) against neural flat")
+    ax.set_xlabel("episode")
+    ax.set_ylabel("return (10-episode moving average, 95% t band)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(names: list[str]) -> int:
+    envs = [HERE / n for n in names] if names else sorted(p for p in HERE.iterdir() if p.is_dir())
+    done = [e for e in envs if all((e / arm / "returns.npy").is_file() for arm in ARMS)]
+    for env in envs:
+        if env not in done:
+            print(f"{env.name}: not both arms finished (needs {', '.join(ARMS)})")
+    for env in done:
+        text = "\n".join(report(env))
+        (env / "tables.md").write_text(text)
+        figure(env, env / "curves.png")
+        print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
