@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci, t_quantile
+from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
 
 HERE = Path(__file__).resolve().parent
 ARMS = ("flat-neural", "sc-neural")
@@ -108,29 +108,13 @@ def report(env: Path) -> list[str]:
 
 
 def figure(env: Path, path: Path) -> None:
-    import matplotlib
+    """Both arms' curves (10-episode moving average, 95% t band), drawn as every study here
+    draws them (``results/option-learning/compare.py``)."""
+    sys.path.insert(0, str(HERE.parent))
+    from figures import compare_module  # results/neural/figures.py
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    for arm in ARMS:
-        x = np.load(env / arm / "returns.npy")
-        kernel = np.ones(10) / 10  # a 10-episode moving average, per run
-        smooth = np.array([np.convolve(row, kernel, mode="valid") for row in x])
-        m = smooth.mean(0)
-        h = t_quantile(0.975, len(smooth) - 1) * smooth.std(0, ddof=1) / np.sqrt(len(smooth))
-        e = np.arange(10, x.shape[1] + 1)
-        ax.plot(e, m, label=f"{arm} ({len(x)} runs)")
-        ax.fill_between(e, m - h, m + h, alpha=0.2)
-    ax.set_title(f"{env.name}: neural skill chaining (default) against neural flat")
-    ax.set_xlabel("episode")
-    ax.set_ylabel("return (10-episode moving average, 95% t band)")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    runs = {arm: {"returns": np.load(env / arm / "returns.npy")} for arm in ARMS}
+    compare_module().figure(runs, path)
 
 
 def main(names: list[str]) -> int:
