@@ -54,8 +54,7 @@ from typing import TYPE_CHECKING
 import torch
 from torch import Tensor, nn
 
-from skillchain_torch.backends.native import check_same_kernels
-from skillchain_torch.backends.select import flat_step
+from skillchain_torch.backends.select import check_same_kernels, flat_step
 from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead

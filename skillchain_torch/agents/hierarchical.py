@@ -75,8 +75,11 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor, nn
 
-from skillchain_torch.backends.native import check_same_kernels
-from skillchain_torch.backends.select import discovery_rules, hierarchical_step
+from skillchain_torch.backends.select import (
+    check_same_kernels,
+    discovery_rules,
+    hierarchical_step,
+)
 from skillchain_torch.discovery import (
     CONVERGENCE_EPISODES,
     CONVERGENCE_THRESHOLD,

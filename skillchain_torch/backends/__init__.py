@@ -3,7 +3,8 @@ rule that chooses them.
 
 A backend is never the definition of a rule: the torch path is. A model (``features/``,
 ``options/``, ``agents/``, ``discovery/``, ``rng.py``) reads as its rules, and its dispatch is
-one call into its backend here. :mod:`.select` is the one switch: a kernel that sums in an
+one call into the kernel :mod:`.select` handed it when it was built: outside this package only
+:mod:`.select` is imported. :mod:`.select` is the one switch: a kernel that sums in an
 order of its own runs only where every piece it replaces is *exactly* the built-in class (not
 a subclass), on the CPU in float64, and built (:func:`compiled`; otherwise the torch path
 runs, and asking for the kernel anyway is a ``ValueError`` naming the piece); the kernels that
@@ -17,6 +18,7 @@ One module per concern, each with its C source beside it (``_<name>.c``, built b
 :mod:`.rng`             CounterRNG's draws (the same bits)
 :mod:`.discovery`       skill chaining's per-step bookkeeping (the same bits)
 :mod:`.initiation`      the initiation classifier's memberships, stores and fits
+                        (:class:`.compiled_initiation.CompiledInitiation` calls them)
 :mod:`.hierarchical`    the hierarchical agent's whole step
 :mod:`.sarsa`           the flat Sarsa agent's step
 :mod:`.native`          what their Python sides share (``for_c``, the kernel kind of a state)

@@ -90,8 +90,9 @@ class CompiledExecutionTrace(ExecutionTrace):
         if (getattr(classifier, "native", False) and self.states.dtype == torch.float64
                 and self.states.shape[-1] == OBS_DIM):  # fmt: skip
             touched = torch.zeros(classifier.population, classifier.slots, dtype=torch.bool)
-            initiation_kernels.store_executions(classifier.stores, self.states, slot, duration,
-                                                success, failure, touched)  # fmt: skip
+            stores = initiation_kernels.stores_of(classifier)
+            initiation_kernels.store_executions(stores, self.states, slot, duration, success,
+                                                failure, touched)  # fmt: skip
             classifier.dirty |= touched
             return touched
         return super().store_examples(classifier, slot, duration, success, failure)

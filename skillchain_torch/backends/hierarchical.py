@@ -112,8 +112,8 @@ def resolve(native: bool | None, *, option_head, top_head, top_features, device:
     The step replaces the maths of the option heads, the top-level head and its features, so
     it runs only where they are exactly :class:`FourierOptionQHead`, :class:`LinearQHead` and
     :class:`FourierBasis`, on ``device`` the CPU. The initiation sets are not replaced (their
-    memberships reach the step from torch); the classifier chooses its own kernels
-    (``InitiationClassifier.set_native``).
+    memberships reach the step from torch); the classifier takes its own kernel from
+    :func:`~.select.initiation_kernel` (``InitiationClassifier.set_native``).
     """
     exact = type(option_head) is FourierOptionQHead
     needs = {

@@ -1,7 +1,9 @@
 """The initiation classifier's memberships and fits in C (``_initiation.c``).
 
-:class:`~skillchain_torch.options.InitiationClassifier` uses these when its ``native`` flag is
-on (the skill-chaining agent turns it on with its own compiled kernels, on CPU float64):
+:class:`~.compiled_initiation.CompiledInitiation` calls these for an
+:class:`~skillchain_torch.options.InitiationClassifier` given one by
+:func:`~.select.initiation_kernel` (the skill-chaining agent asks for it with its own compiled
+step, on CPU float64):
 
 * :func:`contains`: every slot's membership of one state per agent, each slot one pass (the
   logit, then for constrained slots the stored positives until one is within reach);
@@ -49,7 +51,7 @@ except ImportError:  # built without a C compiler: the classifier keeps its torc
     _c = _stores_c = None
 
 __all__ = ["AVAILABLE", "Stores", "contains", "exp", "fit", "logistic_sweeps", "store",
-           "store_executions"]
+           "store_executions", "stores_of"]
 
 AVAILABLE = _c is not None
 OBS_DIM = 4
@@ -68,6 +70,14 @@ class Stores(NamedTuple):
     ring: bool  #: ``replacement == "ring"`` (the newest C), else the reservoir
     keep_negatives: bool  #: a positive never replaces a stored negative
     store_failures: bool = False  #: a negative always enters a full store (failure_place)
+
+
+def stores_of(classifier) -> Stores:
+    """An :class:`~skillchain_torch.options.InitiationClassifier`'s stores as the kernels take
+    them (they write its buffers in place)."""
+    return Stores(classifier.examples, classifier.labels, classifier.count, classifier.seen,
+                  classifier.generation, classifier.seeds, classifier.replacement == "ring",
+                  classifier.keep_negatives, classifier.store_failures)  # fmt: skip
 
 
 def contains(factors: Tensor, centered: bool, weight: Tensor, bias: Tensor,

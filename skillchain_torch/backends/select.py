@@ -32,8 +32,13 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator, Mapping, Sequence
 
-__all__ = ["builtin_type_problems", "compiled", "discovery_rules", "flat_step",
-           "hierarchical_step", "same_bits_kernel", "same_bits_kernels"]
+import torch
+
+from skillchain_torch.backends.native import check_same_kernels  # (a saved state's kind)
+
+__all__ = ["builtin_type_problems", "check_same_kernels", "compiled", "discovery_rules",
+           "flat_step", "hierarchical_step", "initiation_kernel", "same_bits_kernel",
+           "same_bits_kernels"]
 
 
 def builtin_type_problems(pieces: Mapping[str, tuple[object, type]]) -> list[str]:
@@ -79,6 +84,35 @@ def hierarchical_step(native: bool | None, **pieces):
     from skillchain_torch.backends.compiled_step import CompiledStep
 
     return CompiledStep()
+
+
+def initiation_kernel(classifier, native: bool | None):
+    """The initiation classifier's compiled memberships, fits and stores
+    (:class:`~.compiled_initiation.CompiledInitiation`) or ``None`` (its torch path):
+    ``native`` as :func:`compiled` reads it, for a classifier that is exactly the built-in
+    :class:`~skillchain_torch.options.InitiationClassifier` (a subclass may change any rule,
+    which C would not run), with 4-d observations, on the CPU in float64. The hierarchical
+    agent asks once, when it is built (``InitiationClassifier.set_native``).
+
+    Example:
+        >>> from skillchain_torch.options import InitiationClassifier
+        >>> initiation_kernel(InitiationClassifier(population=1, slots=1), False) is None
+        True
+    """
+    from skillchain_torch.backends import initiation
+    from skillchain_torch.options.initiation import InitiationClassifier
+
+    w = classifier.weight
+    if not compiled(native, {
+        "the compiled classifier (built)": initiation.AVAILABLE,
+        f"a {initiation.OBS_DIM}-d observation": classifier.obs_dim == initiation.OBS_DIM,
+        f"the classifier on the CPU in float64 (it is on {w.device}, {w.dtype})":
+            w.device.type == "cpu" and w.dtype == torch.float64,
+    }, builtin_type_problems({"the initiation classifier": (classifier, InitiationClassifier)})):
+        return None
+    from skillchain_torch.backends.compiled_initiation import CompiledInitiation
+
+    return CompiledInitiation(classifier.distance_dims)
 
 
 def same_bits_kernel(name: str):

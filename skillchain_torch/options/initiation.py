@@ -26,9 +26,7 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from skillchain_torch.backends import initiation as backend
-from skillchain_torch.backends.native import for_c
-from skillchain_torch.backends.select import builtin_type_problems, compiled
+from skillchain_torch.backends.select import initiation_kernel
 from skillchain_torch.features import PolynomialFeatures
 from skillchain_torch.invariant import rowwise_dot, rowwise_sum
 from skillchain_torch.options import initiation_fit
@@ -171,40 +169,37 @@ class InitiationClassifier(nn.Module):
         for name in ("trained", "constrained", "dirty"):
             self.register_buffer(name, zeros(pk, dtype=torch.bool, device=device))
         self.register_buffer("seeds", agent_seeds(seed, population).to(device))
-        self.native = False  # the compiled membership and fits (set_native): a run-time choice
+        # The compiled memberships, fits and stores, or None (this file's torch path): chosen
+        # once, by backends.select.initiation_kernel, when the agent that owns the set is built.
+        self.kernel = None
+
+    @property
+    def native(self) -> bool:
+        """Whether the compiled kernel runs this set's memberships, fits and stores."""
+        return self.kernel is not None
 
     def set_native(self, native: bool | None = None) -> bool:
-        """Use the compiled :func:`contains` and fits (:mod:`~skillchain_torch.backends.
-        initiation`) or not; ``None``: when they are built, the classifier is exactly this
-        class (a subclass may change any rule, which C would not run) and it is on the CPU in
-        float64. Their sums run in an order of their own (rounding-level differences from the
-        torch path).
-        Returns the choice; ``True`` where it cannot apply raises ``ValueError`` naming why.
+        """Take the compiled kernel (:func:`~skillchain_torch.backends.select.initiation_kernel`)
+        or the torch path; ``None``: the kernel where it is built, the classifier is exactly
+        this class (a subclass may change any rule, which C would not run) and it is on the
+        CPU in float64. The kernel's sums run in an order of their own (rounding-level
+        differences from the torch path). Returns the choice; ``True`` where it cannot apply
+        raises ``ValueError`` naming why.
 
         Example:
             >>> clf = InitiationClassifier(population=1, slots=2, capacity=8)
             >>> clf.set_native(False), clf.native
             (False, False)
         """
-        w = self.weight
-        self.native = compiled(native, {
-            "the compiled classifier (built)": backend.AVAILABLE,
-            f"a {OBS_DIM}-d observation": self.obs_dim == OBS_DIM,
-            f"the classifier on the CPU in float64 (it is on {w.device}, {w.dtype})":
-                w.device.type == "cpu" and w.dtype == torch.float64,
-        }, builtin_type_problems({"the initiation classifier": (self, InitiationClassifier)}))
-        if self.native:
-            dims = torch.zeros(OBS_DIM, dtype=torch.bool)
-            dims[list(self.distance_dims)] = True
-            self._dims = dims
+        self.kernel = initiation_kernel(self, native)
         return self.native
 
     def _apply(self, fn, *args, **kwargs):
         # Moved off the CPU or out of float64: the compiled path no longer applies.
         out = super()._apply(fn, *args, **kwargs)
-        if self.native and (self.weight.device.type != "cpu"
-                            or self.weight.dtype != torch.float64):  # fmt: skip
-            self.native = False
+        if self.kernel is not None and (self.weight.device.type != "cpu"
+                                        or self.weight.dtype != torch.float64):  # fmt: skip
+            self.kernel = None
         return out
 
     # ----------------------------------------------------------------------------- membership
@@ -244,12 +239,8 @@ class InitiationClassifier(nn.Module):
     def contains(self, obs: Tensor) -> Tensor:
         """Initiation-set membership ``[P, K]``: true everywhere for an untrained slot, else
         ``logit > 0`` (``sigmoid > 1/2``), and near a positive example for constrained slots."""
-        if self.native:
-            obs = self._check_obs(obs)
-            return backend.contains(
-                self.features.factor_index, self.centered, self.weight, self.bias, self.trained,
-                self.constrained, obs, self.examples, self.labels, self.count, self._dims,
-                self.distance, self.constrain_nearest)
+        if self.kernel is not None:
+            return self.kernel.contains(self, self._check_obs(obs))
         member = (self.logit(obs) > 0) | ~self.trained
         # The distance test (C stored examples per slot) only where the logit said yes.
         check = self.constrained & member
@@ -290,12 +281,8 @@ class InitiationClassifier(nn.Module):
         own count only: its numbers are the same whatever else is fitted with it.
         """
         mask = self.dirty if mask is None else check_slot_mask(mask, self.population, self.slots)
-        if self.native:  # every slot in one compiled pass, the same bits
-            return backend.fit(
-                self.features.factor_index, self.centered, for_c(mask, torch.bool),
-                self.examples, self.labels, self.count, self.weight, self.bias, self.lr,
-                self.sweeps, self.balanced, self.sweeps_done, self.trained,
-                self.dirty)  # fmt: skip
+        if self.kernel is not None:  # every slot in one compiled pass
+            return self.kernel.fit(self, mask)
         mask = mask.to(self.weight.device) & (self.count > 0)
         where = mask.nonzero()
         if where.shape[0] > 0:
@@ -324,8 +311,7 @@ class InitiationClassifier(nn.Module):
         """``sweeps`` gradient steps (:func:`logistic_sweeps`) on slots ``(pi, ki)`` over their
         first ``length`` stored places."""
         count = self.count[pi, ki]
-        sweeps = backend.logistic_sweeps if self.native else logistic_sweeps
-        params = sweeps(
+        params = logistic_sweeps(
             self.phi(self.examples[pi, ki, :length]),
             self.labels[pi, ki, :length],
             torch.arange(length, device=count.device) < count[:, None],
@@ -400,14 +386,6 @@ class InitiationClassifier(nn.Module):
         )
 
     # ------------------------------------------------------------------ example stores, distance
-    @property
-    def stores(self) -> backend.Stores:
-        """The stores' buffers and settings as the compiled kernels take them (they write
-        the buffers in place)."""
-        return backend.Stores(self.examples, self.labels, self.count, self.seen,
-                              self.generation, self.seeds, self.replacement == "ring",
-                              self.keep_negatives, self.store_failures)  # fmt: skip
-
     def _within(self, points: Tensor, examples: Tensor) -> Tensor:
         """``|point - example| <= distance`` (in ``distance_dims``) for every pair:
         ``points [..., N, 4]``, ``examples [..., M, 4]`` -> ``[..., N, M]``.
@@ -513,11 +491,9 @@ class InitiationClassifier(nn.Module):
             raise ValueError(f"labels must be [N={n}], got {tuple(labels.shape)}")
         p = torch.as_tensor(agents, dtype=torch.int64, device=device).expand(n)
         k = torch.as_tensor(slots, dtype=torch.int64, device=device).expand(n)
-        if self.native:  # one compiled pass, the same places and bits
-            touched = torch.zeros(self.population, self.slots, dtype=torch.bool)
-            if not backend.store(self.stores, p.contiguous(), k.contiguous(),
-                                 for_c(obs, torch.float64), for_c(labels, torch.bool),
-                                 touched):  # fmt: skip
+        if self.kernel is not None:  # one compiled pass, the same places and bits
+            touched = self.kernel.add_examples(self, p, k, obs, labels)
+            if touched is None:
                 raise ValueError(f"agent/slot indices out of range for P={self.population}, "
                                  f"K={self.slots}")  # fmt: skip
             self.dirty |= touched
