@@ -1,7 +1,7 @@
 """Skill chaining's per-step bookkeeping in C (``_discovery.c``), the same bits.
 
-The discovery pieces call these for CPU tensors when the extension is built (:data:`NATIVE`,
-a switch tests turn off to compare): :func:`~.events.target_indicator`,
+:mod:`.compiled_discovery`'s twins of the discovery pieces call these for CPU tensors where the
+extension is built (:data:`AVAILABLE`): :func:`~.events.target_indicator`,
 :func:`~.overlap.exclude_overlap`, :meth:`~.executions.ExecutionTrace.record` and the
 triggers and gestation samples of :meth:`~.skill_chaining.SkillChaining.after_transition`,
 and :func:`~.events.event_list`.
@@ -13,7 +13,7 @@ Example:
     >>> contains = torch.tensor([[True, True]])
     >>> exclusion = torch.tensor([[[False, False], [True, False]]])  # slot 1 avoids slot 0's set
     >>> trained = torch.tensor([[True, True]])
-    >>> exclude_overlap(contains, exclusion, trained).tolist() if NATIVE else [[True, False]]
+    >>> exclude_overlap(contains, exclusion, trained).tolist() if AVAILABLE else [[True, False]]
     [[True, False]]
 """
 
@@ -29,14 +29,13 @@ try:
 except ImportError:  # built without a C compiler: the torch path
     _c = None
 
-__all__ = ["AVAILABLE", "NATIVE", "applies", "target_indicator", "event_list", "exclude_overlap",
+__all__ = ["AVAILABLE", "applies", "target_indicator", "event_list", "exclude_overlap",
            "record", "record_ring", "copy_slots", "outcomes", "triggers"]
 
 AVAILABLE = _c is not None
-# On wherever built (the same bits: no choice to make). Read once, when an agent is built
-# (skillchain_torch.backends.select.discovery_rules); tests and benchmarks build theirs with it
-# off (same_bits_kernels) to compare.
-NATIVE = AVAILABLE
+# Used wherever built (the same bits: no choice to make), by the compiled twins that
+# skillchain_torch.backends.select.discovery_rules picks once, when an agent is built
+# (same_bits_kernels builds without).
 
 
 OBS_DIM = 4  # the ring and trace kernels copy Pinball's 4 numbers a state
@@ -44,7 +43,7 @@ OBS_DIM = 4  # the ring and trace kernels copy Pinball's 4 numbers a state
 
 def applies(*tensors: Tensor) -> bool:
     """Every tensor is on the CPU (the kernels' one condition; whether they run at all was
-    chosen when the agent was built: select.discovery_rules reads NATIVE)."""
+    chosen when the agent was built, by select.discovery_rules)."""
     for t in tensors:  # (a loop, not all() over a generator: this runs several times a step)
         if not t.is_cpu:
             return False

@@ -26,13 +26,11 @@ try:
 except ImportError:  # built without a C compiler: FourierBasis's torch form serves every input
     _c = None
 
-__all__ = ["AVAILABLE", "NATIVE", "features"]
+__all__ = ["AVAILABLE", "features"]
 
 AVAILABLE = _c is not None
-# On wherever built (the same bits: no choice to make). Read once, when a FourierBasis is built
-# (skillchain_torch.backends.select.same_bits_kernel); tests and benchmarks build theirs with it
-# off (same_bits_kernels) to compare.
-NATIVE = AVAILABLE
+# Used wherever built (the same bits: no choice to make), by a FourierBasis that took it when
+# built (skillchain_torch.backends.select.same_bits_kernel; same_bits_kernels builds without).
 MAX_DIM, MAX_ORDER = 16, 63  # the C side's fixed-size tables
 
 

@@ -25,13 +25,11 @@ try:
 except ImportError:  # built without a C compiler: CounterRNG's tensor path
     _c = None
 
-__all__ = ["AVAILABLE", "NATIVE", "draw"]
+__all__ = ["AVAILABLE", "draw"]
 
 AVAILABLE = _c is not None
-# On wherever built (the same bits: no choice to make). Read once, when a CounterRNG is built
-# (skillchain_torch.backends.select.same_bits_kernel); tests and benchmarks build theirs with it
-# off (same_bits_kernels) to compare.
-NATIVE = AVAILABLE
+# Used wherever built (the same bits: no choice to make), by a CounterRNG that took it when
+# built (skillchain_torch.backends.select.same_bits_kernel; same_bits_kernels builds without).
 
 
 def draw(seeds: Tensor, counter: Tensor, n: int, mask: Tensor | None, salt: int,

@@ -30,11 +30,17 @@ Example:
 from __future__ import annotations
 
 import contextlib
+import contextvars
 from collections.abc import Iterator, Mapping, Sequence
 
 import torch
 
 from skillchain_torch.backends.native import check_same_kernels  # (a saved state's kind)
+
+# The one switch of the kernels that give the torch path's bits (features, draws, discovery's
+# bookkeeping): on, unless a comparison turns it off for a block (same_bits_kernels). A context
+# variable, read only when a piece or an agent is built.
+_SAME_BITS = contextvars.ContextVar("same_bits_kernels", default=True)
 
 __all__ = ["builtin_type_problems", "check_same_kernels", "compiled", "discovery_rules",
            "flat_step", "hierarchical_step", "initiation_kernel", "same_bits_kernel",
@@ -129,7 +135,7 @@ def same_bits_kernel(name: str):
     from skillchain_torch.backends import fourier, rng
 
     module = {"fourier": fourier, "rng": rng}[name]
-    if not module.NATIVE:
+    if not (_SAME_BITS.get() and module.AVAILABLE):
         return None
     return module.features if name == "fourier" else module.draw
 
@@ -166,7 +172,7 @@ def discovery_rules(native: bool) -> type:
     from skillchain_torch.backends import discovery as kernels
     from skillchain_torch.discovery.skill_chaining import SkillChaining
 
-    if not (native and kernels.NATIVE):  # (NATIVE: built, and not off for a comparison)
+    if not (native and kernels.AVAILABLE and _SAME_BITS.get()):  # (not off for a comparison)
         return SkillChaining
     from skillchain_torch.backends.compiled_discovery import CompiledSkillChaining
 
@@ -175,28 +181,23 @@ def discovery_rules(native: bool) -> type:
 
 @contextlib.contextmanager
 def same_bits_kernels(on: bool) -> Iterator[None]:
-    """Within the block, the kernels that give the torch path's bits (features, draws,
-    discovery's bookkeeping, the Pinball step) run where built (``on``) or not at all (the torch
-    path everywhere); as they were after it.
+    """Within the block, pieces and agents built take the kernels that give the torch path's
+    bits (features, draws, discovery's bookkeeping) where built (``on``) or not at all (the
+    torch path everywhere), and the Pinball step runs its compiled physics or not (the env's
+    own switch); as they were after it. Pieces keep what they took when built.
 
     Example:
-        >>> from skillchain_torch.backends import fourier
         >>> with same_bits_kernels(False):
-        ...     fourier.NATIVE
-        False
+        ...     same_bits_kernel("rng") is None
+        True
     """
-    from skillchain_torch.backends import discovery, fourier, rng  # (they import nothing here)
     from skillchain_torch.envs.pinball import native as pinball_native
     from skillchain_torch.envs.pinball import physics  # the env's own fast path
 
-    modules = (fourier, rng, discovery)
-    saved = [module.NATIVE for module in modules], physics.NATIVE
-    for module in modules:
-        module.NATIVE = on and module.AVAILABLE
+    token, saved = _SAME_BITS.set(bool(on)), physics.NATIVE
     physics.NATIVE = on and pinball_native.AVAILABLE
     try:
         yield
     finally:
-        for module, native in zip(modules, saved[0]):
-            module.NATIVE = native
-        physics.NATIVE = saved[1]
+        _SAME_BITS.reset(token)
+        physics.NATIVE = saved

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from skillchain_torch.agents import HierarchicalAgent
-from skillchain_torch.backends import discovery as native_discovery
+from skillchain_torch.backends.select import same_bits_kernels
 from skillchain_torch.options import GoalEvent, OptionBank, OptionStatus, RegionEvent
 
 F64 = torch.float64
@@ -29,10 +29,10 @@ def random_bank(P=40, K=5, seed=0) -> OptionBank:
 
 
 @pytest.mark.parametrize("native", [True, False])
-def test_targets_equal_target_reached(native, monkeypatch):
-    monkeypatch.setattr(native_discovery, "NATIVE", native and native_discovery.NATIVE)
+def test_targets_equal_target_reached(native):
     bank = random_bank()
-    agent = HierarchicalAgent(bank, order=1, events=EVENTS)
+    with same_bits_kernels(native):  # the agent takes discovery's compiled twins, or not
+        agent = HierarchicalAgent(bank, order=1, events=EVENTS)
     g = torch.Generator().manual_seed(1)
     obs = torch.rand(40, 4, dtype=F64, generator=g)
     obs[:10, :2] = 0.9  # inside the region

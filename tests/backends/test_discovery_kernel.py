@@ -6,6 +6,14 @@ import pytest
 import torch
 
 from skillchain_torch.backends import discovery as native_discovery
+from skillchain_torch.backends.compiled_discovery import (
+    CompiledExecutionTrace,
+    CompiledRecentStates,
+    CompiledSkillChaining,
+    compiled_event_list,
+    compiled_exclude_overlap,
+    compiled_target_indicator,
+)
 from skillchain_torch.discovery import InitiationReading, RecentStates, SkillChaining
 from skillchain_torch.discovery.skill_chaining import (
     ExecutionTrace,
@@ -16,8 +24,11 @@ from skillchain_torch.discovery.skill_chaining import (
 )
 from skillchain_torch.options import OptionBank, OptionStatus
 
+# Each test runs the compiled twin (backends/compiled_discovery.py) beside the torch path's
+# class and compares: the twins are what backends.select.discovery_rules picks for a compiled
+# agent.
 needs_native = pytest.mark.skipif(
-    not native_discovery.NATIVE,
+    not native_discovery.AVAILABLE,
     reason="the compiled bookkeeping was not built (no C compiler at install time)")
 
 
@@ -43,14 +54,13 @@ def flags(shape, seed, p=0.5):
 
 @needs_native
 @pytest.mark.parametrize("E", [0, 1, 3])
-def test_target_indicator_event_list_and_overlap_equal_torch(E, monkeypatch):
+def test_target_indicator_event_list_and_overlap_equal_torch(E):
     bank = random_bank(50, 6, E, seed=E)
     base, contains = flags((50, E), 1), flags((50, 6), 2)
     exclusion = overlap_exclusion(bank)
-    got = (target_indicator(bank, base, contains),
-           exclude_overlap(contains, exclusion, bank.classifier.trained),
-           *event_list(bank, E, max_branching=2))
-    monkeypatch.setattr(native_discovery, "NATIVE", False)
+    got = (compiled_target_indicator(bank, base, contains),
+           compiled_exclude_overlap(contains, exclusion, bank.classifier.trained),
+           *compiled_event_list(bank, E, max_branching=2))
     expected = (target_indicator(bank, base, contains),
                 exclude_overlap(contains, exclusion, bank.classifier.trained),
                 *event_list(bank, E, max_branching=2))
@@ -61,29 +71,27 @@ def test_target_indicator_event_list_and_overlap_equal_torch(E, monkeypatch):
 
 
 @needs_native
-def test_record_equals_torch(monkeypatch):
+def test_record_equals_torch():
     head = OptionBank.build(20, 2, order=1).q_head
-    traces = [ExecutionTrace(20, 7, head) for _ in range(2)]
+    traces = [CompiledExecutionTrace(20, 7, head), ExecutionTrace(20, 7, head)]
     g = torch.Generator().manual_seed(3)
     for t in range(12):
         rows, step = flags(20, t), torch.randint(0, 10, (20,), generator=g)  # past T too
         obs = torch.rand(20, 4, dtype=torch.float64, generator=g)
-        for native, trace in zip((True, False), traces):
-            monkeypatch.setattr(native_discovery, "NATIVE", native)
+        for trace in traces:
             trace.record(rows, step, obs)
     assert torch.equal(traces[0].states, traces[1].states)
     assert bool((traces[0].states != 0).any())
 
 
 @needs_native
-def test_recent_states_ring_equals_torch(monkeypatch):
-    rings = [RecentStates(20, 3) for _ in range(2)]
+def test_recent_states_ring_equals_torch():
+    rings = [CompiledRecentStates(20, 3), RecentStates(20, 3)]
     g = torch.Generator().manual_seed(4)
     for t in range(11):  # past the ring's length, with episode restarts between
         rows, restart = flags(20, t), flags(20, 100 + t, p=0.1)
         obs = torch.rand(20, 4, dtype=torch.float64, generator=g)
-        for native, ring in zip((True, False), rings):
-            monkeypatch.setattr(native_discovery, "NATIVE", native)
+        for ring in rings:
             ring.record(rows, obs)
             ring.start_episodes(restart)
     assert torch.equal(rings[0].states, rings[1].states)
@@ -94,27 +102,26 @@ def test_recent_states_ring_equals_torch(monkeypatch):
 
 @needs_native
 @pytest.mark.parametrize("head_kind", ["fourier", "mlp"])
-def test_snapshots_and_dropped_updates_equal_torch(head_kind, monkeypatch):
+def test_snapshots_and_dropped_updates_equal_torch(head_kind):
     """ExecutionTrace.start keeps, and drop_updates puts back, the same weights either way."""
     from skillchain_torch.options import MLPOptionQHead
 
     P, K = 12, 3
     g = torch.Generator().manual_seed(5)
     heads, traces = [], []
-    for _ in range(2):
+    for trace_class in (CompiledExecutionTrace, ExecutionTrace):
         head = (OptionBank.build(P, K, order=1).q_head if head_kind == "fourier"
                 else MLPOptionQHead(P, K, hidden=4, layers=1, seed=0))  # fmt: skip
         for t in head.slot_tensors().values():
             t.copy_(torch.rand(t.shape, dtype=t.dtype, generator=torch.Generator().manual_seed(1)))
         heads.append(head)
-        traces.append(ExecutionTrace(P, 5, head))
+        traces.append(trace_class(P, 5, head))
     for t in range(6):
         rows, failure = flags(P, 10 + t), flags(P, 20 + t, p=0.3)
         slot = torch.randint(-1, K, (P,), generator=g)  # -1: reads slot 0, as torch does
         noise = torch.rand(heads[0].slot_tensors()[next(iter(heads[0].slot_tensors()))].shape,
                            dtype=torch.float64, generator=g)
-        for native, head, trace in zip((True, False), heads, traces):
-            monkeypatch.setattr(native_discovery, "NATIVE", native)
+        for head, trace in zip(heads, traces):
             trace.start(rows, slot)
             next(iter(head.slot_tensors().values())).add_(noise)  # the execution's updates
             trace.drop_updates(slot.clamp(min=0), failure)
@@ -124,7 +131,6 @@ def test_snapshots_and_dropped_updates_equal_torch(head_kind, monkeypatch):
         assert torch.equal(a, b)
     assert bool((traces[0].snapshot[name] != 0).any())
     # A copy really happened: compiled, the put-back slots equal their snapshots.
-    monkeypatch.setattr(native_discovery, "NATIVE", True)
     rows = torch.ones(P, dtype=torch.bool)
     slot = torch.zeros(P, dtype=torch.int64)
     traces[0].start(rows, slot)
@@ -137,16 +143,15 @@ def test_snapshots_and_dropped_updates_equal_torch(head_kind, monkeypatch):
 
 @needs_native
 @pytest.mark.parametrize("positives", [0, 3])
-def test_after_transition_equals_torch(positives, monkeypatch):
+def test_after_transition_equals_torch(positives):
     """Triggers, gestation samples and base events of a step, with the same creations (and
     with a reading's gestation positives, the same examples)."""
     P, K = 40, 5
     results = []
-    for native in (True, False):
-        monkeypatch.setattr(native_discovery, "NATIVE", native)
+    for rules in (CompiledSkillChaining, SkillChaining):
         bank = random_bank(P, K, 1, seed=9)
         bank.status[:, -1] = int(OptionStatus.EMPTY)  # room to create
-        sc = SkillChaining(bank, max_option_steps=5,
+        sc = rules(bank, max_option_steps=5,
                            reading=InitiationReading(gestation_positives=positives))
         if positives:  # a few states of this episode behind each agent
             for t in range(4):

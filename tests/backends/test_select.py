@@ -20,10 +20,14 @@ def test_same_bits_kernels_off_gives_the_same_bits_and_restores_the_switches():
     x = torch.rand(5, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
     on = FourierBasis(4, 3)(x), CounterRNG(torch.arange(3)).uniform(4)
     with select.same_bits_kernels(False):
-        assert not (fourier.NATIVE or rng.NATIVE or discovery.NATIVE)
+        assert select.same_bits_kernel("fourier") is None
+        assert select.same_bits_kernel("rng") is None
+        assert select.discovery_rules(True).__name__ == "SkillChaining"
         off = FourierBasis(4, 3)(x), CounterRNG(torch.arange(3)).uniform(4)
-    assert (fourier.NATIVE, rng.NATIVE, discovery.NATIVE) == (
-        fourier.AVAILABLE, rng.AVAILABLE, discovery.AVAILABLE)
+    # as before after the block
+    assert (select.same_bits_kernel("fourier") is not None) is fourier.AVAILABLE
+    assert (select.same_bits_kernel("rng") is not None) is rng.AVAILABLE
+    assert (select.discovery_rules(True).__name__ == "CompiledSkillChaining") is discovery.AVAILABLE
     for a, b in zip(on, off):
         assert torch.equal(a, b)
 

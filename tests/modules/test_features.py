@@ -123,17 +123,21 @@ def test_invalid_arguments():
 
 
 @pytest.mark.parametrize(("dim", "order"), [(1, 0), (1, 3), (2, 1), (3, 2), (4, 3), (4, 4), (4, 5)])
-def test_fourier_compiled_arguments_are_the_torch_bits(dim, order, monkeypatch):
+def test_fourier_compiled_arguments_are_the_torch_bits(dim, order):
     """On the CPU in float64 the arguments are formed in C; the features must not change."""
     from skillchain_torch.backends import fourier
+    from skillchain_torch.backends.select import same_bits_kernels
 
     gen = torch.Generator().manual_seed(dim * 10 + order)
     # in and outside [0, 1] (velocities after reflections), batched and strided
     x = torch.rand(3, 37, dim + 1, dtype=torch.float64, generator=gen)[..., :dim] * 1.5 - 0.25
     basis = FourierBasis(dim, order)
     compiled = basis(x)
-    monkeypatch.setattr(fourier, "NATIVE", False)
-    assert torch.equal(compiled, basis(x))
+    with same_bits_kernels(False):  # a basis built without the kernel: the torch path
+        torch_basis = FourierBasis(dim, order)
+    assert basis._kernel is not None or not fourier.AVAILABLE
+    assert torch_basis._kernel is None
+    assert torch.equal(compiled, torch_basis(x))
     assert compiled.shape == (3, 37, (order + 1) ** dim)
     if not fourier.AVAILABLE:
         pytest.skip("the compiled arguments were not built (no C compiler at install time)")
