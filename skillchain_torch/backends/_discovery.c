@@ -16,6 +16,7 @@
 #include <string.h>
 
 #define OBS_DIM 4
+#define EMPTY 0
 #define GESTATING 1
 #define LEARNED 3
 
@@ -196,20 +197,23 @@ static PyObject *outcomes(PyObject *self, PyObject *args)
 
 /* triggers(P, K, E, parent, target_event, status, base_now, base_next, contains,
  * contains_next, reached, stepped, sample, gestation_q, max_branching, out_gestation_q,
- * out_base_trig, out_slot_trig, out_base_now, out_hits) -> (bool, bool): for the stepped
- * rows, the base events and the LEARNED options' sets the transition entered (false at s, true
- * at s'), and the gestating options whose target it entered (out_hits) take max(their sample,
- * sample[p]); returns whether an event on its agent's list (see listed) was triggered (only
- * those can create) and whether any gestating option's target was entered. */
+ * out_base_trig, out_slot_trig, out_base_now, out_hits[, blocked]) -> (bool, bool): for the
+ * stepped rows, the base events and the LEARNED options' sets the transition entered (false at
+ * s, true at s'), and the gestating options whose target it entered (out_hits) take max(their
+ * sample, sample[p]); returns whether an event on its agent's list (see listed) was triggered
+ * by an agent that may create (only those can: not one whose slots are all live and whose full
+ * slots are logged, blocked[p], uint8 [P], 0: none given) and whether any gestating option's
+ * target was entered. */
 static PyObject *triggers(PyObject *self, PyObject *args)
 {
     Py_ssize_t P, K, E, max_branching;
     unsigned long long par_p, te_p, st_p, bn_p, bx_p, con_p, conx_p, reach_p, step_p, sam_p,
-        gq_p, ogq_p, obt_p, ost_p, obn_p, hit_p;
-    if (!PyArg_ParseTuple(args, "nnnKKKKKKKKKKKnKKKKK", &P, &K, &E, &par_p, &te_p, &st_p, &bn_p,
-                          &bx_p, &con_p, &conx_p, &reach_p, &step_p, &sam_p, &gq_p,
-                          &max_branching, &ogq_p, &obt_p, &ost_p, &obn_p, &hit_p))
+        gq_p, ogq_p, obt_p, ost_p, obn_p, hit_p, blk_p = 0;
+    if (!PyArg_ParseTuple(args, "nnnKKKKKKKKKKKnKKKKK|K", &P, &K, &E, &par_p, &te_p, &st_p,
+                          &bn_p, &bx_p, &con_p, &conx_p, &reach_p, &step_p, &sam_p, &gq_p,
+                          &max_branching, &ogq_p, &obt_p, &ost_p, &obn_p, &hit_p, &blk_p))
         return NULL;
+    const uint8_t *blocked = (const uint8_t *)(uintptr_t)blk_p;
     uint8_t *base_on = (uint8_t *)malloc((size_t)(K + E + 1)), *slot_on = base_on + E;
     if (!base_on) return PyErr_NoMemory();
     const int64_t *parent = (const int64_t *)(uintptr_t)par_p;
@@ -252,6 +256,11 @@ static PyObject *triggers(PyObject *self, PyObject *args)
             out_base_now[s] = go ? base_next[s] : base_now[s];
         }
         if (!fired || any) continue;
+        if (blocked && blocked[p]) { /* its full slots are logged: it creates nothing more */
+            int full = 1;
+            for (Py_ssize_t k = 0; k < K; k++) full &= st[k] != EMPTY;
+            if (full) continue;
+        }
         listed(par, te, st, K, E, max_branching, base_on, slot_on);
         for (Py_ssize_t k = 0; k < K; k++) any |= slot_trig[p * K + k] && slot_on[k];
         for (Py_ssize_t e = 0; e < E; e++) any |= base_trig[p * E + e] && base_on[e];

@@ -145,7 +145,10 @@ class CompiledSkillChaining(SkillChaining):
         self.gestation_q, base_trig, slot_trig, self.base_now, any_listed, hits = (
             kernels.triggers(bank.parent, bank.target_event, bank.status, self.base_now,
                              events, raw_now, raw_next, reached, stepped, sample,
-                             self.gestation_q, self.max_branching, self._triggers_out))
+                             self.gestation_q, self.max_branching, self._triggers_out,
+                             blocked=self.slots_full_logged))
+        # (an agent whose full slots are logged creates nothing: _create would only find that
+        # out; late in a run every agent is full and enters a learned set at most steps)
         if self.recent is not None and hits is not None:  # (the hits of _gestation_hits)
             self._gestation_positives(hits)
         if not any_listed:  # only listed events create

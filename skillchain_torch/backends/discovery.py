@@ -150,12 +150,14 @@ def outcomes(option: Tensor, reached: Tensor, duration: Tensor, ended: Tensor,
 def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Tensor,
              base_next: Tensor, contains: Tensor, contains_next: Tensor, reached: Tensor,
              stepped: Tensor, sample: Tensor, gestation_q: Tensor, max_branching: int,
-             trig_out: tuple[Tensor, Tensor] | None = None,
+             trig_out: tuple[Tensor, Tensor] | None = None, blocked: Tensor | None = None,
              ) -> tuple[Tensor, Tensor, Tensor, Tensor, bool, Tensor | None]:  # fmt: skip
     """One step's ``(gestation_q, base_trig, slot_trig, base_now, any_listed, hits)`` of
     :meth:`~.skill_chaining.SkillChaining.after_transition` (new tensors, or ``trig_out``'s
     contiguous bool ``(base_trig [P, E], slot_trig [P, K])`` for the triggers); ``any_listed``:
-    an event on its agent's list (:func:`event_list`) was triggered, so a creation may follow;
+    an event on its agent's list (:func:`event_list`) was triggered, so a creation may follow
+    (not counting agents in ``blocked [P]``, bool, whose slots are all live: skill chaining's
+    ``slots_full_logged``, agents that create nothing more);
     ``hits [P, K]``: the gestating options whose target the transition entered (``None`` when
     there is none, the usual step)."""
     P, K = status.shape
@@ -174,5 +176,6 @@ def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Ten
         P, K, E, parent.data_ptr(), target_event.data_ptr(), status.data_ptr(),
         *(x.data_ptr() for x in flags), sample.data_ptr(), gestation_q.data_ptr(),
         int(max_branching), out_q.data_ptr(), base_trig.data_ptr(), slot_trig.data_ptr(),
-        out_base_now.data_ptr(), hits.data_ptr())  # fmt: skip
+        out_base_now.data_ptr(), hits.data_ptr(),
+        0 if blocked is None else _flags(blocked).data_ptr())  # fmt: skip
     return out_q, base_trig, slot_trig, out_base_now, any_listed, hits if any_hit else None

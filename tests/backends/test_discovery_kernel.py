@@ -142,8 +142,8 @@ def test_snapshots_and_dropped_updates_equal_torch(head_kind):
 
 
 @needs_native
-@pytest.mark.parametrize("positives", [0, 3])
-def test_after_transition_equals_torch(positives):
+@pytest.mark.parametrize(("positives", "full_logged"), [(0, False), (3, False), (0, True)])
+def test_after_transition_equals_torch(positives, full_logged):
     """Triggers, gestation samples and base events of a step, with the same creations (and
     with a reading's gestation positives, the same examples)."""
     P, K = 40, 5
@@ -152,7 +152,10 @@ def test_after_transition_equals_torch(positives):
         bank = random_bank(P, K, 1, seed=9)
         bank.status[:, -1] = int(OptionStatus.EMPTY)  # room to create
         sc = rules(bank, max_option_steps=5,
-                           reading=InitiationReading(gestation_positives=positives))
+                   reading=InitiationReading(gestation_positives=positives))
+        if full_logged:  # every other agent's slots are full and logged: it creates nothing
+            bank.status[::2, -1] = int(OptionStatus.LEARNING)
+            sc.slots_full_logged[::2] = True
         if positives:  # a few states of this episode behind each agent
             for t in range(4):
                 sc.recent.record(torch.ones(P, dtype=torch.bool),
@@ -226,3 +229,26 @@ def test_store_examples_compiled_equals_torch(replacement):
         for name in ("examples", "labels", "count", "seen", "dirty"):
             assert torch.equal(*(getattr(b.classifier, name) for b in banks)), name
     assert int(banks[0].classifier.seen.max()) > 6
+
+
+@needs_native
+def test_triggers_skip_agents_that_create_nothing_more():
+    """An agent whose slots are all live and whose full slots are logged creates nothing, so
+    its triggers do not call for a creation; full but not yet logged, or logged with a slot
+    freed since, they do (as SkillChaining._create decides)."""
+    K = 3
+    zeros, goal = torch.zeros(1, 1, dtype=torch.bool), torch.ones(1, 1, dtype=torch.bool)
+    no = torch.zeros(1, K, dtype=torch.bool)
+    for free_slot, logged, expected in ((False, True, False), (False, False, True),
+                                        (True, True, True)):  # fmt: skip
+        bank = OptionBank.build(1, K, order=1, capacity=8)
+        bank.status[0] = int(OptionStatus.LEARNING)
+        bank.target_event[0] = -1  # none targets the goal: the goal is on the list
+        if free_slot:
+            bank.status[0, 2] = int(OptionStatus.EMPTY)
+        *_, any_listed, _ = native_discovery.triggers(
+            bank.parent, bank.target_event, bank.status, zeros, goal, no, no, no,
+            torch.ones(1, dtype=torch.bool), torch.zeros(1, dtype=torch.float64),
+            torch.zeros(1, K, dtype=torch.float64), max_branching=3,
+            blocked=torch.tensor([logged]))  # fmt: skip
+        assert any_listed is expected, (free_slot, logged)
