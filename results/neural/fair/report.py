@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skillchain_torch.trainers.study.compare import save_comparison
 from skillchain_torch.trainers.study.intervals import diff_ci, mean_ci
 
 HERE = Path(__file__).resolve().parent
@@ -108,13 +109,11 @@ def report(env: Path) -> list[str]:
 
 
 def figure(env: Path, path: Path) -> None:
-    """Both arms' curves (10-episode moving average, 95% t band), drawn as every study here
-    draws them (``results/option-learning/compare.py``)."""
-    sys.path.insert(0, str(HERE.parent))
-    from figures import compare_module  # results/neural/figures.py
-
-    runs = {arm: {"returns": np.load(env / arm / "returns.npy")} for arm in ARMS}
-    compare_module().figure(runs, path)
+    """Both arms' learning curves (mean and 95% interval over runs), through the library's
+    ``skillchain plot`` figure."""
+    curves = {arm: np.load(env / arm / "returns.npy") for arm in ARMS}
+    save_comparison(curves, path, title=f"{env.name}: neural skill chaining (default) "
+                    "against neural flat")  # fmt: skip
 
 
 def main(names: list[str]) -> int:
