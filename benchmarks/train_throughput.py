@@ -123,11 +123,12 @@ def skill_chaining_trainer(population: int, threads: int, seed: int = 0,
 
     cfg = TrainConfig(agent="skill-chaining", map=MAP, runs=population, episodes=10_000,
                       seed=seed, slots=12)  # fmt: skip
-    trainer = PopulationTrainer(cfg, num_threads=threads, native=native)
-    seeds = torch.arange(population, dtype=torch.int64) + seed
-    given = OptionBank.from_agent(OPTIONS, 0, population, seeds=seeds)
-    trainer.agent.bank.load_state_dict(given.state_dict())
+    # (pieces take their kernels when built: build them inside the switch's block)
     with same_bits_kernels(native is not False):
+        trainer = PopulationTrainer(cfg, num_threads=threads, native=native)
+        seeds = torch.arange(population, dtype=torch.int64) + seed
+        given = OptionBank.from_agent(OPTIONS, 0, population, seeds=seeds)
+        trainer.agent.bank.load_state_dict(given.state_dict())
         trainer.train(max_agent_steps=20 * population)
     return trainer
 
@@ -145,8 +146,8 @@ def paired_cost(population: int, threads: int, rounds: int, flat_steps: int,
     trainers = {}
     for name, native in (("flat_torch", False), ("flat_native", None)):
         cfg = TrainConfig(map=MAP, runs=population, episodes=10_000, seed=0)
-        trainers[name] = PopulationTrainer(cfg, num_threads=threads, native=native)
-        with same_bits_kernels(native is not False):
+        with same_bits_kernels(native is not False):  # (built inside: pieces keep kernels)
+            trainers[name] = PopulationTrainer(cfg, num_threads=threads, native=native)
             trainers[name].train(max_agent_steps=20 * population)
     for name, native in (("sc_torch", False), ("sc_native", None)):
         trainers[name] = skill_chaining_trainer(population, threads, native=native)

@@ -4,7 +4,7 @@
 :class:`~skillchain_torch.options.InitiationClassifier` that is exactly the built-in class,
 on the CPU in float64 with 4-d observations, where :mod:`.initiation`'s kernels are built (the
 hierarchical agent asks for it once, when it is built, with its own compiled step). The
-classifier keeps it as ``kernel`` and calls it in place of its torch path in ``contains``,
+classifier keeps it as ``_kernel`` and calls it in place of its torch path in ``contains``,
 ``fit`` and ``add_examples``, so its own file reads as the torch path alone. The sums run in an
 order of their own (equal to the torch path to rounding); the stores' places are the torch
 path's, bit for bit.
@@ -12,7 +12,7 @@ path's, bit for bit.
 Example:
     >>> from skillchain_torch.options import InitiationClassifier
     >>> clf = InitiationClassifier(population=1, slots=2, capacity=8)
-    >>> clf.set_native(None) == AVAILABLE, isinstance(clf.kernel, CompiledInitiation) == AVAILABLE
+    >>> clf.set_native(None) == AVAILABLE, isinstance(clf._kernel, CompiledInitiation) == AVAILABLE
     (True, True)
 """
 

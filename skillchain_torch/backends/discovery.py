@@ -172,10 +172,15 @@ def triggers(parent: Tensor, target_event: Tensor, status: Tensor, base_now: Ten
     base_trig, slot_trig = trig_out
     out_base_now = torch.empty(P, E, dtype=torch.bool)
     hits = torch.empty(P, K, dtype=torch.bool)
+    if blocked is not None:  # (held here: C reads its address)
+        if blocked.shape != (P,) or not blocked.is_cpu:
+            raise ValueError(f"blocked must be a CPU [P={P}] mask, got {tuple(blocked.shape)} "
+                             f"on {blocked.device}")  # fmt: skip
+        blocked = _flags(blocked)
     any_listed, any_hit = _c.triggers(
         P, K, E, parent.data_ptr(), target_event.data_ptr(), status.data_ptr(),
         *(x.data_ptr() for x in flags), sample.data_ptr(), gestation_q.data_ptr(),
         int(max_branching), out_q.data_ptr(), base_trig.data_ptr(), slot_trig.data_ptr(),
         out_base_now.data_ptr(), hits.data_ptr(),
-        0 if blocked is None else _flags(blocked).data_ptr())  # fmt: skip
+        0 if blocked is None else blocked.data_ptr())  # fmt: skip
     return out_q, base_trig, slot_trig, out_base_now, any_listed, hits if any_hit else None

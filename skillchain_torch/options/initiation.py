@@ -171,12 +171,12 @@ class InitiationClassifier(nn.Module):
         self.register_buffer("seeds", agent_seeds(seed, population).to(device))
         # The compiled memberships, fits and stores, or None (this file's torch path): chosen
         # once, by backends.select.initiation_kernel, when the agent that owns the set is built.
-        self.kernel = None
+        self._kernel = None
 
     @property
     def native(self) -> bool:
         """Whether the compiled kernel runs this set's memberships, fits and stores."""
-        return self.kernel is not None
+        return self._kernel is not None
 
     def set_native(self, native: bool | None = None) -> bool:
         """Take the compiled kernel (:func:`~skillchain_torch.backends.select.initiation_kernel`)
@@ -191,15 +191,15 @@ class InitiationClassifier(nn.Module):
             >>> clf.set_native(False), clf.native
             (False, False)
         """
-        self.kernel = initiation_kernel(self, native)
+        self._kernel = initiation_kernel(self, native)
         return self.native
 
     def _apply(self, fn, *args, **kwargs):
         # Moved off the CPU or out of float64: the compiled path no longer applies.
         out = super()._apply(fn, *args, **kwargs)
-        if self.kernel is not None and (self.weight.device.type != "cpu"
+        if self._kernel is not None and (self.weight.device.type != "cpu"
                                         or self.weight.dtype != torch.float64):  # fmt: skip
-            self.kernel = None
+            self._kernel = None
         return out
 
     # ----------------------------------------------------------------------------- membership
@@ -239,8 +239,8 @@ class InitiationClassifier(nn.Module):
     def contains(self, obs: Tensor) -> Tensor:
         """Initiation-set membership ``[P, K]``: true everywhere for an untrained slot, else
         ``logit > 0`` (``sigmoid > 1/2``), and near a positive example for constrained slots."""
-        if self.kernel is not None:
-            return self.kernel.contains(self, self._check_obs(obs))
+        if self._kernel is not None:
+            return self._kernel.contains(self, self._check_obs(obs))
         member = (self.logit(obs) > 0) | ~self.trained
         # The distance test (C stored examples per slot) only where the logit said yes.
         check = self.constrained & member
@@ -281,8 +281,8 @@ class InitiationClassifier(nn.Module):
         own count only: its numbers are the same whatever else is fitted with it.
         """
         mask = self.dirty if mask is None else check_slot_mask(mask, self.population, self.slots)
-        if self.kernel is not None:  # every slot in one compiled pass
-            return self.kernel.fit(self, mask)
+        if self._kernel is not None:  # every slot in one compiled pass
+            return self._kernel.fit(self, mask)
         mask = mask.to(self.weight.device) & (self.count > 0)
         where = mask.nonzero()
         if where.shape[0] > 0:
@@ -491,8 +491,8 @@ class InitiationClassifier(nn.Module):
             raise ValueError(f"labels must be [N={n}], got {tuple(labels.shape)}")
         p = torch.as_tensor(agents, dtype=torch.int64, device=device).expand(n)
         k = torch.as_tensor(slots, dtype=torch.int64, device=device).expand(n)
-        if self.kernel is not None:  # one compiled pass, the same places and bits
-            touched = self.kernel.add_examples(self, p, k, obs, labels)
+        if self._kernel is not None:  # one compiled pass, the same places and bits
+            touched = self._kernel.add_examples(self, p, k, obs, labels)
             if touched is None:
                 raise ValueError(f"agent/slot indices out of range for P={self.population}, "
                                  f"K={self.slots}")  # fmt: skip

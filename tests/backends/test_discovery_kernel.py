@@ -213,7 +213,8 @@ def test_store_examples_compiled_equals_torch(replacement):
     banks = [OptionBank.build(P, K, order=1, capacity=6, replacement=replacement)
              for _ in range(2)]  # fmt: skip
     banks[0].classifier.set_native(True)
-    traces = [ExecutionTrace(P, T, bank.q_head) for bank in banks]
+    traces = [CompiledExecutionTrace(P, T, banks[0].q_head),
+              ExecutionTrace(P, T, banks[1].q_head)]
     for _ in range(6):
         states = torch.rand(P, T, 4, dtype=torch.float64, generator=g)
         slot = torch.randint(0, K, (P,), generator=g)
@@ -252,3 +253,37 @@ def test_triggers_skip_agents_that_create_nothing_more():
             torch.zeros(1, K, dtype=torch.float64), max_branching=3,
             blocked=torch.tensor([logged]))  # fmt: skip
         assert any_listed is expected, (free_slot, logged)
+
+
+@needs_native
+def test_agents_that_create_nothing_more_never_reach_creation(monkeypatch):
+    """Every agent full, its full slots logged, every one entering the goal: the compiled
+    rules do not call _create at all (the torch rules call it and create nothing)."""
+    P, K = 6, 3
+    results = []
+    for rules in (CompiledSkillChaining, SkillChaining):
+        bank = random_bank(P, K, 1, seed=2)
+        bank.status.fill_(int(OptionStatus.LEARNING))
+        bank.target_event.fill_(-1)  # the goal is on every agent's list
+        sc = rules(bank, max_option_steps=5)
+        sc.slots_full_logged.fill_(True)
+        sc.base_now = torch.zeros(P, 1, dtype=torch.bool)
+        calls = []
+
+        def counted(*args, calls=calls, original=sc._create):
+            calls.append(1)
+            return original(*args)
+
+        monkeypatch.setattr(sc, "_create", counted)
+        no, ones = torch.zeros(P, dtype=torch.bool), torch.ones(P, dtype=torch.bool)
+        created = sc.after_transition(
+            obs=torch.full((P, 4), 0.5, dtype=torch.float64), executing=no,
+            step=torch.zeros(P, dtype=torch.int64), events=torch.ones(P, 1, dtype=torch.bool),
+            contains=torch.zeros(P, K, dtype=torch.bool), option=torch.full((P,), -1),
+            value=torch.zeros(P, dtype=torch.float64),
+            reached=torch.zeros(P, K, dtype=torch.bool), duration=torch.ones(P, dtype=torch.int64),
+            decision_ended=no, terminated=no, stepped=ones)  # fmt: skip
+        results.append((len(calls), created, bank.status.clone()))
+    assert results[0][0] == 0 and results[1][0] == 1
+    assert torch.equal(results[0][1], results[1][1]) and not bool(results[0][1].any())
+    assert torch.equal(results[0][2], results[1][2])

@@ -73,13 +73,13 @@ def test_a_classifier_takes_its_kernel_from_select_once():
         pass
 
     clf = InitiationClassifier(population=1, slots=2, capacity=8)
-    assert clf.kernel is None and not clf.native  # the torch path until an agent asks
+    assert clf._kernel is None and not clf.native  # the torch path until an agent asks
     from skillchain_torch.backends import initiation
 
     assert clf.set_native(None) is initiation.AVAILABLE
-    assert isinstance(clf.kernel, CompiledInitiation) is initiation.AVAILABLE
+    assert isinstance(clf._kernel, CompiledInitiation) is initiation.AVAILABLE
     assert Mine(population=1, slots=2, capacity=8).set_native(None) is False
     with pytest.raises(ValueError, match="the initiation classifier is Mine"):
         Mine(population=1, slots=2, capacity=8).set_native(True)
     clf.to(torch.float32)  # off float64: the kernel no longer applies
-    assert clf.kernel is None
+    assert clf._kernel is None
