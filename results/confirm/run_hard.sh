@@ -12,6 +12,8 @@ OUT=${1:?OUT}
 shift
 mkdir -p "$OUT"
 source results/run_arm.sh
+# The arms' flags are the simple block's (results/confirm/run.sh), chosen on screening seeds.
+FAITHFUL="--preset paper --initiation-start biased --initiation-bias 2 --initiation-centered"
 for job in "$@"; do
   arm=${job%%:*}; span=${job#*:}; a=${span%-*}; b=${span#*-}
   # (a checkpoint every 5 episodes: the slowest of 25 hard agents took 45 minutes to reach its
@@ -23,6 +25,11 @@ for job in "$@"; do
     flat) run "$name" --agent flat ;;
     default) run "$name" --agent skill-chaining ;;
     given-options) run "$name" --agent given-options --options "$OUT/default/parts/$a-$b/options.pt" --options-agent each ;;
+    paper) run "$name" --agent skill-chaining --preset paper ;;
+    paper-b2) run "$name" --agent skill-chaining $FAITHFUL ;;
+    no-chaining) run "$name" --agent skill-chaining --slots 1 ;;  # control (a), agents 0-49
+    random-subgoals) run "$name" --agent skill-chaining --subgoals random ;;  # (b), 0-49
+    flat-o6) run "$name" --agent flat --order 6 --alpha "${O6_ALPHA:?set O6_ALPHA (screened: results/controls/screen_hard.sh)}" ;;
     *) echo "unknown arm $arm" >&2; exit 2 ;;
   esac
 done
