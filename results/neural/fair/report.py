@@ -108,6 +108,39 @@ def report(env: Path) -> list[str]:
     return lines
 
 
+def returns_of(env: Path, arm: str) -> np.ndarray | None:
+    """An arm's ``[runs, episodes]`` returns: its own ``returns.npy``, or, while it runs, the
+    first episodes committed in ``interim/`` (a run's first N episodes are the N-episode run)."""
+    path = env / arm / "returns.npy"
+    if path.is_file():
+        return np.load(path)
+    interim = sorted((env / "interim").glob(f"{arm}-returns-1-*.npy"))
+    return np.load(interim[-1]) if interim else None
+
+
+def cause_report(env: Path, arm: str) -> list[str]:
+    """``arm`` (a run that changes a suspected cause, e.g. ``sc-neural-o50``) against neural flat
+    and neural skill chaining over its episodes, per 25-episode window."""
+    runs = {name: returns_of(env, name) for name in ("flat-neural", "sc-neural", arm)}
+    missing = [name for name, r in runs.items() if r is None]
+    if missing:
+        return [f"{env.name}/{arm}: no returns yet for {', '.join(missing)}"]
+    episodes = min(r.shape[1] for r in runs.values())
+    spans = windows(episodes) + [(episodes // 2 + 1, episodes)]
+    lines = [f"## {env.name}: {arm} against neural flat and neural skill chaining", "",
+             "| | " + " | ".join(f"{a}-{b}" for a, b in spans) + " |",
+             "|---|" + "---:|" * len(spans)]  # fmt: skip
+    for name, r in runs.items():
+        lines.append(f"| {name} ({len(r)} runs) | "
+                     + " | ".join(fmt(*mean_ci(m)) for m in window_means(r, spans)) + " |")
+    for other in ("flat-neural", "sc-neural"):
+        diffs = [diff_ci(x, y) for x, y in zip(window_means(runs[arm], spans),
+                                               window_means(runs[other], spans))]
+        lines.append(f"| {arm} - {other} | "
+                     + " | ".join(fmt(d, h, True) for d, h in diffs) + " |")
+    return lines + [""]
+
+
 def figure(env: Path, path: Path) -> None:
     """Both arms' learning curves (mean and 95% interval over runs), through the library's
     ``skillchain plot`` figure."""
@@ -127,6 +160,11 @@ def main(names: list[str]) -> int:
         (env / "tables.md").write_text(text)
         figure(env, env / "curves.png")
         print(text)
+    for env in envs:  # the runs on a suspected cause (fair_cause.sh), against both arms
+        for arm in sorted(p.name for p in env.glob("sc-neural-*") if (p / "returns.npy").is_file()):
+            text = "\n".join(cause_report(env, arm))
+            (env / f"tables-{arm}.md").write_text(text)
+            print(text)
     return 0
 
 
