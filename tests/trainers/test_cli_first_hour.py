@@ -9,6 +9,7 @@ import json
 from skillchain_torch.trainers import TrainConfig
 from skillchain_torch.trainers.config.arguments import build_parser
 from skillchain_torch.trainers.config.cli import _attach_values, main
+from skillchain_torch.trainers.outputs import checkpoint as checkpoint_module
 from skillchain_torch.trainers.study.reproduce import paper_experiments
 
 BOUNDS = "-2.4:2.4,-3:3,-0.21:0.21,-3.5:3.5"
@@ -103,3 +104,27 @@ def test_resume_with_more_episodes_extends_a_finished_run_bit_for_bit(tmp_path, 
             pass
         err = capsys.readouterr().err.strip()
         assert message in err and err.count("\n") == 0
+
+
+def test_keep_checkpoints_keeps_the_newest_and_the_one_a_longer_run_extends_from(tmp_path):
+    """--keep-checkpoints 2: the run's checkpoint folder holds the newest two and the newest
+    written before any agent finished; the run still extends bit for bit from it, and a resume
+    never deletes a checkpoint an earlier process wrote."""
+    import numpy as np
+
+    base = ["train", "--agent", "skill-chaining", "--map", "pinball_box", "--seed", "4",
+            "--max-episode-steps", "400", "--runs", "3", "--checkpoint-every", "1", "--quiet"]
+    every, kept = tmp_path / "every", tmp_path / "kept"
+    assert main([*base, "--episodes", "5", "--out", str(every)]) == 0
+    assert main([*base, "--episodes", "5", "--out", str(kept), "--keep-checkpoints", "2"]) == 0
+    for name in ("returns.npy", "lengths.npy"):
+        assert np.array_equal(np.load(every / name), np.load(kept / name)), name
+    written = sorted(p.name for p in (every / "checkpoints").glob("ckpt_*.pt"))
+    left = sorted(p.name for p in (kept / "checkpoints").glob("ckpt_*.pt"))
+    anchor = checkpoint_module.extension_checkpoint(every)[0].name
+    assert len(written) > 3 and left == sorted({*written[-2:], anchor})
+    assert main(["train", "--resume", str(kept), "--episodes", "7", "--quiet"]) == 0
+    longer = tmp_path / "seven"
+    assert main([*base, "--episodes", "7", "--out", str(longer)]) == 0
+    for name in ("returns.npy", "lengths.npy"):
+        assert np.array_equal(np.load(longer / name), np.load(kept / name)), name

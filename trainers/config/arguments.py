@@ -26,7 +26,7 @@ __all__ = ["build_parser", "CONFIG_OPTIONS"]
 CONFIG_OPTIONS = (
     "agent", "preset", "map", "env", "obs_bounds", "runs", "episodes", "seed", "alpha", "epsilon",
     "gamma", "order", "scale_step_size", "max_episode_steps", "checkpoint_every",
-    "checkpoint_minutes", "options",
+    "checkpoint_minutes", "keep_checkpoints", "options",
     "options_agent", "slots", "initiation_bias", "initiation_centered", "gestation_positives",
     "initiation_start", "initiation_constrain", "one_class_fits", "failure_bootstrap",
     "keep_negatives", "store_failures", "constrain_nearest", "intra_option_primitives",
@@ -150,6 +150,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="also checkpoint when M minutes of training passed since the last one, 0: never "
         "(default 30)",
+    )
+    train.add_argument(
+        "--keep-checkpoints",
+        type=int,
+        default=None,
+        metavar="N",
+        help="keep only the newest N checkpoints (and the one a longer run would extend from); "
+        "0: all (default 0; a neural run's checkpoints are 0.2-0.7 GB each)",
     )
     train.add_argument("--device", default=None, help="torch device (default cpu)")
     train.add_argument(
@@ -327,7 +335,8 @@ TRAIN_GROUPS = (
      ("top_head", "option_head", "initiation", "top_lr", "top_target_update",
       "top_bootstrap", "epsilon_init", "annealing_steps")),
     ("output", "where results go, resuming, and how the run computes",
-     ("out", "resume", "overwrite", "checkpoint_every", "checkpoint_minutes", "quiet", "device",
+     ("out", "resume", "overwrite", "checkpoint_every", "checkpoint_minutes", "keep_checkpoints",
+      "quiet", "device",
       "threads",
       "torch_only", "workers", "block_size", "ray_address")),
 )

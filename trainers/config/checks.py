@@ -172,6 +172,8 @@ def check_values(config) -> None:
         ("checkpoint_minutes", config.checkpoint_minutes,
          math.isfinite(config.checkpoint_minutes) and config.checkpoint_minutes >= 0,
          ">= 0 and finite"),
+        ("keep_checkpoints", config.keep_checkpoints, config.keep_checkpoints >= 0,
+         ">= 0 (0: keep all)"),
         ("slots", config.slots, config.slots >= 1, ">= 1"),
         ("initiation_bias", config.initiation_bias, math.isfinite(config.initiation_bias),
          "finite"),

@@ -169,6 +169,10 @@ class TrainConfig:
         checkpoint_minutes: also write one when this many minutes of training have passed since
             the last (0: never), so a killed run loses at most that much whatever its episodes'
             lengths (hard Pinball's first episodes take an agent tens of minutes).
+        keep_checkpoints: keep only the newest N checkpoints a process wrote (and the newest
+            written before any agent finished, from which ``--resume --episodes`` extends the
+            run); 0: keep all. A neural run's checkpoint holds its replay memories (0.2-0.7 GB
+            each), so 300 episodes at one every 10 fill tens of GB.
         device: torch device of the run.
     """
 
@@ -186,6 +190,7 @@ class TrainConfig:
     max_episode_steps: int | None = None
     checkpoint_every: int = 25
     checkpoint_minutes: float = 30.0
+    keep_checkpoints: int = 0
     device: str = "cpu"
     options: str | None = None
     options_agent: int | None = 0

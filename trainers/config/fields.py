@@ -25,7 +25,7 @@ LEGACY_FIELDS = {"preset": "default", "max_option_steps": 250, "failure_bootstra
 
 # Fields that may differ between a checkpoint and the trainer that loads it: they change how
 # the run is written down or where it computes, not the numbers it produces.
-RESUME_FIELDS = ("checkpoint_every", "checkpoint_minutes", "device")
+RESUME_FIELDS = ("checkpoint_every", "checkpoint_minutes", "keep_checkpoints", "device")
 # Where the values came from: a label only (the values themselves are fields), so two configs
 # with the same values are the same run whichever preset they started from.
 LABEL_FIELDS = ("preset",)

@@ -223,6 +223,8 @@ class PopulationTrainer:
         self._training = False
         self._next_checkpoint = config.checkpoint_every or None
         self._checkpoint_wall = 0.0  # wall_time at the last checkpoint (checkpoint_minutes)
+        self._written: list[Path] = []  # checkpoints this process wrote, oldest first
+        self._anchor: Path | None = None  # the newest of them written before any agent finished
         self._ops: dict[str, list[tuple[str, object]]] = {stage: [] for stage in STAGES}
         self._modules: dict[str, object] = {}
         self._pending_modules: dict[str, dict] = {}  # loaded before their module registered
@@ -401,8 +403,26 @@ class PopulationTrainer:
         self.check_learners()  # never a checkpoint of diverged weights
         save_checkpoint(self, path)
         self._checkpoint_wall = self.wall_time
+        self._prune_checkpoints(path)
         self._call("post_checkpoint", path)
         return path
+
+    def _prune_checkpoints(self, newest: Path) -> None:
+        """With ``keep_checkpoints`` N > 0, delete this process's older checkpoints but the
+        newest N and the newest written while no agent had finished (the one ``--resume
+        --episodes`` extends a run from). Files this process did not write are never touched,
+        so a resumed run keeps whatever the earlier processes left."""
+        if newest not in self._written:
+            self._written.append(newest)
+        if int(self.episodes_done.max()) < self.config.episodes:
+            self._anchor = newest
+        keep = self.config.keep_checkpoints
+        if not keep:
+            return
+        drop = [p for p in self._written[:-keep] if p != self._anchor]
+        for old in drop:
+            old.unlink(missing_ok=True)
+        self._written = [p for p in self._written if p not in drop]
 
     def write_results(self, out_dir: str | Path | None = None) -> None:
         """``returns.npy`` (float64 [P, E]), ``lengths.npy`` (int64) and ``config.json`` (for

@@ -33,7 +33,8 @@ __all__ = ["TRAINER_FIELDS", "agent_label", "check_agent", "recorded_config", "r
 # The fields the trainer itself reads (the env, the run's length and seeds, where it computes,
 # and the exploration schedule it imposes on any agent); every other field builds the agent.
 TRAINER_FIELDS = ("map", "env", "obs_bounds", "obs_dim", "num_actions", "runs", "episodes",
-                  "seed", "max_episode_steps", "checkpoint_every", "checkpoint_minutes", "device",
+                  "seed", "max_episode_steps", "checkpoint_every", "checkpoint_minutes",
+                  "keep_checkpoints", "device",
                   "epsilon_init",
                   "annealing_steps")  # fmt: skip
 PINBALL_SIZES = (4, 5)  # observation dims and actions of every Pinball map

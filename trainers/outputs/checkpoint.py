@@ -13,8 +13,9 @@ tensors' bytes, dtypes and shapes, and the plain values), which :func:`read_chec
 verifies; a file whose bytes were altered, or a truncated one, raises
 :class:`DamagedCheckpoint`. Checkpoints written before the digest (no ``sha256``) load
 unverified. :func:`save_checkpoint` writes a temporary file, reads it back and verifies it
-before it replaces anything, and every checkpoint is kept (``ckpt_{episodes}.pt``), so a
-failed write loses none. :func:`resume_checkpoint` loads the newest checkpoint that verifies,
+before it replaces anything, and every checkpoint is kept (``ckpt_{episodes}.pt``; with
+``keep_checkpoints`` the newest few and the one a longer run extends from), so a failed write
+loses none. :func:`resume_checkpoint` loads the newest checkpoint that verifies,
 moving damaged newer ones aside (``NAME.damaged``) with a warning that names them.
 
 Example:
@@ -171,7 +172,8 @@ def read_checkpoint(path: str | Path) -> dict:
 def load_checkpoint(path: str | Path, trainer) -> None:
     """Restore ``trainer`` from ``path``; its config must match the checkpoint's.
 
-    Only ``checkpoint_every``, ``checkpoint_minutes`` and ``device`` may differ. A mismatch
+    Only ``checkpoint_every``, ``checkpoint_minutes``, ``keep_checkpoints`` and ``device`` may
+    differ. A mismatch
     (e.g. another map, number of runs or seed) raises ``ValueError`` naming the file and the
     field.
     """
