@@ -20,7 +20,8 @@ for env in "$@"; do
     fi
     extra=(); [ "$arm" = flat-neural ] && extra=(--max-branching 0)
     nice -n 10 .venv/bin/skillchain train --env "gymnasium:$env" --agent skill-chaining \
-      --runs 30 --episodes 300 --seed 1000 --checkpoint-every 10 --quiet --out "$out" \
+      --runs 30 --episodes 300 --seed 1000 --checkpoint-every 10 --keep-checkpoints 3 --quiet \
+      --out "$out" \
       --overwrite "${NEURAL[@]}" "${extra[@]}"
   done
 done

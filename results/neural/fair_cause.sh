@@ -16,5 +16,6 @@ if [ -d "$out/checkpoints" ]; then
   exec nice -n 10 .venv/bin/skillchain train --resume "$out" --quiet
 fi
 exec nice -n 10 .venv/bin/skillchain train --env "gymnasium:$env" --agent skill-chaining \
-  --runs 30 --episodes "$episodes" --seed 1000 --checkpoint-every 10 --quiet --out "$out" \
+  --runs 30 --episodes "$episodes" --seed 1000 --checkpoint-every 10 --keep-checkpoints 3 \
+  --quiet --out "$out" \
   --overwrite --max-option-steps 50 "${NEURAL[@]}"

@@ -17,6 +17,7 @@ for arm in flat-neural sc-neural; do
   fi
   extra=(); [ "$arm" = flat-neural ] && extra=(--max-branching 0)
   nice -n 10 .venv/bin/skillchain train --map pinball_simple_single --agent skill-chaining \
-    --runs 10 --episodes 100 --seed 1000 --checkpoint-every 5 --quiet --out "$out" \
+    --runs 10 --episodes 100 --seed 1000 --checkpoint-every 5 --keep-checkpoints 3 --quiet \
+    --out "$out" \
     --overwrite --threads 1 "${NEURAL[@]}" "${extra[@]}"
 done
