@@ -144,6 +144,19 @@ class FlatSarsaAgent(nn.Module):
             self._sarsa_step = partial(kernel.learn, self)
             self._observe_step = partial(kernel.observe, self)
 
+    def set_epsilon(self, epsilon: float) -> None:
+        """Explore at ``epsilon`` from the next action on; an annealing schedule
+        (``TrainConfig.epsilon_init``) calls it each population step.
+
+            >>> from skillchain_torch.trainers import TrainConfig
+            >>> agent = FlatSarsaAgent(TrainConfig(runs=2, seed=0), native=False)
+            >>> agent.set_epsilon(0.5); agent.policy.epsilon
+            0.5
+        """
+        if not 0.0 <= epsilon <= 1.0:
+            raise ValueError(f"epsilon must be in [0, 1], got {epsilon}")
+        self.policy.epsilon = float(epsilon)
+
     # ------------------------------------------------------------------ pieces
     def featurize(self, obs: Tensor) -> Tensor:
         """``FourierBasis(obs)``: ``[n, 4] -> [n, F]``."""

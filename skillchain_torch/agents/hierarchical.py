@@ -355,7 +355,7 @@ class HierarchicalAgent(nn.Module):
         else:
             self._decide = partial(kernel.decide, self)
             self._actions = partial(kernel.actions, self)
-            self._transition_rest = partial(kernel.transition, self)
+            self._transition_rest = self._compiled_transition_rest
 
     # Per-step state is reassigned every step; nn.Module.__setattr__ (which looks for
     # parameters, buffers and submodules) costs more than the tensor maths for these.
@@ -504,6 +504,21 @@ class HierarchicalAgent(nn.Module):
         self._act(continuing, u[:, 2:])
         if self.WANTS_VALUE:  # Q(s', d) of the decision in force, for discovery's samples
             self.last_value = self._value_in_force(stepped, decision_ended)
+        return info
+
+    def _compiled_transition_rest(self, next_obs: Tensor, reward: Tensor, terminated: Tensor,
+                                  truncated: Tensor, stepped: Tensor, contains_next: Tensor,
+                                  reached: Tensor, u: Tensor, own_next: Tensor) -> dict:
+        """:meth:`_torch_transition_rest` in the compiled step's one pass (bound by
+        :meth:`_bind_step` when the agent is built): the kernel computes, the agent adopts the
+        new state it returns."""
+        state, phi, q, value, started, info = self.kernel.transition(
+            self, next_obs, reward, terminated, truncated, stepped, contains_next, reached, u,
+            own_next)  # fmt: skip
+        self.step_state = state
+        self.last_phi, self.last_q, self.last_value = phi, q, value
+        self.own_contains = own_next
+        self._options_starting(started)
         return info
 
     def _value_in_force(self, stepped: Tensor, decision_ended: Tensor) -> Tensor:
@@ -813,6 +828,21 @@ class HierarchicalAgent(nn.Module):
 
     def flush(self) -> None:
         """Nothing to write back: the state is held for all agents."""
+
+    def set_epsilon(self, epsilon: float) -> None:
+        """The top level's exploration from the next decision on; an annealing schedule
+        (``TrainConfig.epsilon_init``) calls it each population step. Executing options keep
+        ``option_epsilon``.
+
+            >>> from skillchain_torch.options import OptionBank
+            >>> agent = HierarchicalAgent(OptionBank.build(population=2, slots=1, order=1),
+            ...                           order=1, seed=0)
+            >>> agent.set_epsilon(0.5); agent.epsilon
+            0.5
+        """
+        if not 0.0 <= epsilon <= 1.0:
+            raise ValueError(f"epsilon must be in [0, 1], got {epsilon}")
+        self.epsilon = float(epsilon)
 
     # ------------------------------------------------------------------ state
     _EPISODE = ("obs", "contains", "own_contains", "decision", "option", "decision_return",

@@ -30,7 +30,8 @@ AVAILABLE = kernels.AVAILABLE
 
 class CompiledStep:
     """The compiled calls of a :class:`~skillchain_torch.agents.HierarchicalAgent` (see the
-    module docstring); stateless: every call reads and writes the agent it is given."""
+    module docstring); stateless: every call reads the agent it is given and returns what it
+    computed; the agent adopts it (it writes no attribute of the agent)."""
 
     @staticmethod
     def decide(agent, phi: Tensor, available: Tensor, rows: Tensor,
@@ -61,10 +62,14 @@ class CompiledStep:
     @classmethod
     def transition(cls, agent, next_obs: Tensor, reward: Tensor, terminated: Tensor,
                    truncated: Tensor, stepped: Tensor, contains_next: Tensor, reached: Tensor,
-                   uniforms: Tensor, own_next: Tensor) -> dict[str, Tensor]:  # fmt: skip
-        """The rest of ``HierarchicalAgent.transition`` in one pass; the same monitoring dict.
-        Where the option heads' features are among the top level's, the kernel picks them from
-        ``phi`` itself instead of a second basis."""
+                   uniforms: Tensor, own_next: Tensor) -> tuple:  # fmt: skip
+        """The rest of ``HierarchicalAgent.transition`` in one pass. It reads the agent and
+        writes nothing: it returns ``(state, phi, q, value, started, info)``, the new
+        :class:`~skillchain_torch.agents.step_state.StepState`, the top level's features and
+        values at s' (``value``: Q(s', d) of the decision in force, where the agent wants it),
+        the rows that started an option, and the same monitoring dict as the torch path, for
+        the agent to adopt. Where the option heads' features are among the top level's, the
+        kernel picks them from ``phi`` itself instead of a second basis."""
         phi = agent.features(next_obs)
         columns = agent._code_columns
         code = agent.bank.q_head.encode(next_obs) if columns is None else None
@@ -74,12 +79,10 @@ class CompiledStep:
         learned = kernels.Learned(agent.q_head.weight, agent.bank.q_head.weight,
                                   agent.update.step_size, agent.bank.status)  # fmt: skip
         before = agent.step_state
-        agent.step_state, out = kernels.transition(before, learned, at_next, cls.rules(agent),
-                                                   want_value=agent.WANTS_VALUE)  # fmt: skip
-        agent.last_phi, agent.last_q, agent.last_value = phi, out.q, out.value
-        agent.own_contains = own_next
-        agent._options_starting(out.started)
-        return {"decision_ended": out.decision_ended, "duration": out.duration,
+        state, out = kernels.transition(before, learned, at_next, cls.rules(agent),
+                                        want_value=agent.WANTS_VALUE)  # fmt: skip
+        info = {"decision_ended": out.decision_ended, "duration": out.duration,
                 "decision_return": out.decision_return, "option_delta": out.option_delta,
                 "smdp_delta": out.smdp_delta, "decision": before.decision,
                 "option": before.option, "reached": reached}  # fmt: skip
+        return state, phi, out.q, out.value, out.started, info

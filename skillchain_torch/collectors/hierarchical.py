@@ -215,7 +215,7 @@ class HierarchicalCollector:
             self.global_step += 1
             self.frames += n
             if schedule is not None:
-                agent.epsilon = schedule(self.global_step)
+                agent.set_epsilon(schedule(self.global_step))
             next_observations.append(obs)
             rewards.append(reward)
             returns.append(ret)

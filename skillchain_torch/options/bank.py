@@ -135,6 +135,18 @@ class OptionBank(nn.Module):
         """What the options were learned on, as saved: ``map``, ``obs_dim``, ``num_actions``."""
         return {"map": self.map, "obs_dim": self.obs_dim, "num_actions": self.num_actions}
 
+    def learned_on(self, map: str) -> None:
+        """Record the env the options are being learned on (``map``: a Pinball map or a
+        ``gymnasium:ID``), saved with them so that a run on another env refuses them; a bank
+        whose env is already known keeps it.
+
+            >>> bank = OptionBank.build(population=1, slots=1, order=1)
+            >>> bank.learned_on("pinball_simple_single"); bank.environment()["map"]
+            'pinball_simple_single'
+        """
+        if self.map is None and not self.legacy:
+            self.map = str(map)
+
     def feature_settings(self) -> dict[str, Any]:
         """The options' feature settings, as saved: the Q-head class and its basis (Fourier
         ``order``, or the MLP's ``hidden``/``layers``), and the initiation classifiers'

@@ -192,6 +192,36 @@ def test_compiled_step_takes_and_returns_the_declared_state():
     assert bool(((after.duration == 0) | (after.duration == kept["duration"] + 1)).all())
 
 
+@needs_native
+def test_the_compiled_transition_writes_no_attribute_of_the_agent():
+    """The backend computes and returns; the agent adopts (issue 51: no object writes
+    another's attributes). Writing any attribute during the kernel's call fails here."""
+    P = 4
+    agent = HierarchicalAgent(half_plane_bank(P, seed=1), order=2, seed=3, native=True)
+    agent.begin(torch.rand(P, 4, dtype=F64, generator=gen(0)))
+    kernel_transition, inside = agent.kernel.transition, []
+
+    class Guarded(type(agent)):  # the same agent, refusing writes while the kernel runs
+        def __setattr__(self, name, value):
+            if inside:
+                raise AssertionError(f"the compiled step wrote agent.{name}")
+            super().__setattr__(name, value)
+
+    def transition(*args):
+        inside.append(True)
+        try:
+            return kernel_transition(*args)
+        finally:
+            inside.clear()
+
+    agent.__class__ = Guarded
+    agent.kernel = type("Kernel", (), {"transition": staticmethod(transition)})()
+    before = agent.step_state
+    agent.observe(torch.rand(P, 4, dtype=F64, generator=gen(1)), torch.full((P,), -1.0,
+                                                                            dtype=F64))
+    assert agent.step_state is not before  # the agent adopted the returned state
+
+
 # ---------------------------------------------------------------------------- agents
 BOX = dict(agent="skill-chaining", map="pinball_box", max_episode_steps=300, slots=4)
 

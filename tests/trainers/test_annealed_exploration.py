@@ -156,3 +156,38 @@ def test_an_annealed_neural_run_learns_through_the_command_line(tmp_path):
     saved = TrainConfig.load_json(out / "config.json")
     assert (saved.epsilon_init, saved.annealing_steps, saved.top_bootstrap) == (1.0, 50, "max")
     assert torch.isfinite(torch.from_numpy(np.load(out / "returns.npy"))).all()
+
+
+def test_the_flat_agent_anneals_too():
+    # Before set_epsilon the trainer assigned agent.epsilon, an attribute the flat agent never
+    # reads: --epsilon-init was silently a constant epsilon for --agent flat.
+    flat = TrainConfig(**{**ANNEALED.to_dict(), "agent": "flat"})
+    trainer = PopulationTrainer(flat)
+    assert trainer.agent.policy.epsilon == 1.0
+    trainer.train(max_agent_steps=2 * 50)
+    assert trainer.agent.policy.epsilon == pytest.approx(0.5)
+    constant = PopulationTrainer(TrainConfig(**{**flat.to_dict(), "epsilon_init": None,
+                                                "annealing_steps": 0})).train()  # fmt: skip
+    assert not np.array_equal(PopulationTrainer(flat).train().returns, constant.returns)
+
+
+def test_set_epsilon_refuses_a_value_outside_0_1():
+    agent = PopulationTrainer(ANNEALED).agent
+    with pytest.raises(ValueError, match=r"epsilon must be in \[0, 1\], got 1.5"):
+        agent.set_epsilon(1.5)
+
+
+def test_a_user_agent_without_set_epsilon_is_refused_in_one_line():
+    plain = PopulationTrainer(TrainConfig(**{**ANNEALED.to_dict(), "epsilon_init": None,
+                                             "annealing_steps": 0})).agent  # fmt: skip
+
+    class NoSchedule:  # every EpisodeAgent method, delegated, but no set_epsilon
+        population = plain.population
+
+        def __getattr__(self, name):
+            if name == "set_epsilon":
+                raise AttributeError(name)
+            return getattr(plain, name)
+
+    with pytest.raises(ValueError, match="has no set_epsilon"):
+        PopulationTrainer(ANNEALED, agent=NoSchedule())

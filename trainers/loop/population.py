@@ -206,13 +206,16 @@ class PopulationTrainer:
         # step once per population step while active, so the schedule reads global_step.
         self._epsilon = (None if config.epsilon_init is None else LinearEpsilon(
             config.epsilon_init, config.epsilon, config.annealing_steps))  # fmt: skip
+        if self._epsilon is not None and not callable(getattr(agent, "set_epsilon", None)):
+            raise ValueError(f"epsilon_init anneals the agent's exploration, but "
+                             f"{type(agent).__name__} has no set_epsilon(epsilon) method")
         # The loop: the collector steps the envs and the agents, and hands over a batch at
         # every step in which episodes ended (records, hooks and checkpoints go between).
         self.collector = HierarchicalCollector(self.stepper, agent, episodes=config.episodes,
                                                epsilon=self._epsilon, state=False)
         bank = getattr(self.agent, "bank", None)
-        if bank is not None and bank.map is None and not bank.legacy:
-            bank.map = config.env_name  # saved with the options (another env refuses them)
+        if bank is not None:
+            bank.learned_on(config.env_name)  # saved with the options (another env refuses them)
         self.diverged: Diverged | None = None
         P, E = config.runs, config.episodes
         self.returns = np.full((P, E), np.nan)
@@ -262,7 +265,7 @@ class PopulationTrainer:
     def _anneal(self) -> None:
         """The top level's epsilon at ``global_step`` (where the config anneals it)."""
         if self._epsilon is not None:
-            self.agent.epsilon = self._epsilon(self.global_step)
+            self.agent.set_epsilon(self._epsilon(self.global_step))
 
     # ------------------------------------------------------------------ hooks
     def register_op(self, stage: str, op, name: str | None = None) -> None:
