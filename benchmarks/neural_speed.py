@@ -3,6 +3,7 @@
     python benchmarks/neural_speed.py                     # MountainCar-v0, CPU
     python benchmarks/neural_speed.py --device cuda       # where a GPU is lent
     python benchmarks/neural_speed.py --steps 300 --populations 1 10   # a quick look
+    python benchmarks/neural_speed.py --steps 300 --populations 100 --floor  # what 10x needs
 
 The peer, run in the same process on the same env: a single-agent DQN loop written as CleanRL's
 ``dqn.py`` writes it (a Gymnasium env stepped directly, an MLP of the same size as
@@ -128,6 +129,45 @@ def live_option_steps_per_second(env_id: str, population: int, steps: int, devic
     return (trainer.agent_steps - before) / (time.perf_counter() - start), every
 
 
+def learner_floor(env_id: str, population: int, steps: int, device: str) -> tuple[float, float]:
+    """``(agent steps/s, agent steps/s of the minibatch updates alone)``: the population's rate
+    as :func:`agent_steps_per_second` times it, and the rate it would reach if everything but
+    the replay learners' minibatch updates (the top level's ``ReplayTD._step``, the options'
+    ``OptionReplay._learn``: sampling, forward, backward, Adam) took no time. Each agent
+    updates as often as the DQN does (a minibatch every 4 of its steps), so the second number
+    bounds what batching the rest of the step can reach on this device."""
+    from skillchain_torch.objectives.option_replay import OptionReplay
+    from skillchain_torch.objectives.replay import ReplayTD
+    from skillchain_torch.trainers import PopulationTrainer, TrainConfig
+
+    cfg = TrainConfig(agent="skill-chaining", preset="paper", env=f"gymnasium:{env_id}",
+                      runs=population, episodes=10_000, seed=0, device=device,
+                      top_head="mlp", option_head="mlp", initiation="mlp")  # fmt: skip
+    trainer = PopulationTrainer(cfg)
+    trainer.train(max_agent_steps=min(steps, 50) * population)
+    inside = [0.0]
+
+    def timed(method):
+        def wrapper(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return method(*args, **kwargs)
+            finally:
+                inside[0] += time.perf_counter() - start
+        return wrapper
+
+    originals = ReplayTD._step, OptionReplay._learn
+    ReplayTD._step, OptionReplay._learn = timed(originals[0]), timed(originals[1])
+    try:
+        before, start = trainer.agent_steps, time.perf_counter()
+        trainer.train(max_agent_steps=before + steps * population)
+        wall = time.perf_counter() - start
+    finally:
+        ReplayTD._step, OptionReplay._learn = originals
+    done = trainer.agent_steps - before
+    return done / wall, done / max(inside[0], 1e-9)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--env", default="MountainCar-v0")
@@ -137,6 +177,8 @@ def main(argv=None) -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--live-options", action="store_true",
                         help="also time P = 100 once every agent has a live option (slow)")
+    parser.add_argument("--floor", action="store_true",
+                        help="also time P = 100's minibatch updates alone: the rate they allow")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     dqn = dqn_steps_per_second(args.env, args.dqn_steps, args.device)
@@ -150,6 +192,12 @@ def main(argv=None) -> None:
         rate, every = live_option_steps_per_second(args.env, 100, args.steps, args.device)
         label = "every agent with a live option" if every else "NOT every agent had an option"
         print(f"| neural skill chaining, P = 100, {label} | {rate:,.0f} | {rate / dqn:.2f}x |")
+    if args.floor:
+        rate, bound = learner_floor(args.env, 100, args.steps, args.device)
+        print(f"| neural skill chaining, P = 100 (again, learners timed) | {rate:,.0f} | "
+              f"{rate / dqn:.2f}x |")
+        print(f"| its minibatch updates alone, P = 100 (a bound) | {bound:,.0f} | "
+              f"{bound / dqn:.2f}x |")
     # Linear flat Sarsa at P = 100 here against the same agent on Pinball (target: 15%).
     pinball = flat_steps_per_second(100, args.steps)
     here = flat_steps_per_second(100, args.steps, args.env)
