@@ -67,6 +67,7 @@ Example:
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Sequence
 from functools import partial
 from operator import attrgetter
@@ -74,6 +75,7 @@ from operator import attrgetter
 import torch
 from tensordict import TensorDict
 from torch import Tensor, nn
+from torch.utils.hooks import RemovableHandle
 
 from skillchain_torch.backends.select import (
     check_same_kernels,
@@ -302,6 +304,8 @@ class HierarchicalAgent(nn.Module):
         # path's, or with a compiled step their compiled twins (the same bits), chosen once.
         self.rules = discovery_rules(self.native)
         self._exclusion = overlap_exclusion(self.bank) if overlap else None
+        # register_transition_hook's (an OrderedDict: torch's RemovableHandle holds a weakref)
+        self._transition_hooks: OrderedDict[int, object] = OrderedDict()
         self.epsilon, self.option_epsilon = float(epsilon), float(option_epsilon)
         self.gamma = float(gamma)
         self.max_option_steps = int(max_option_steps)
@@ -768,11 +772,36 @@ class HierarchicalAgent(nn.Module):
         self._start_decisions(self._full(obs, self.obs), self.active.clone())
         return self.actions
 
+    def register_transition_hook(self, hook) -> RemovableHandle:
+        """Call ``hook(info, next_obs, terminated, stepped)`` after each step the agents learn
+        from (:meth:`observe`, :meth:`observe_ends`), with :meth:`transition`'s monitoring
+        dict and its ``[P]`` arguments; ``handle.remove()`` stops it (torch's hook
+        convention). The option monitor counts executions this way for agents that keep no
+        counts of their own.
+
+            >>> from skillchain_torch.options import OptionBank
+            >>> agent = HierarchicalAgent(OptionBank.build(population=1, slots=1, order=1),
+            ...                           order=1, seed=0)
+            >>> seen = []
+            >>> handle = agent.register_transition_hook(lambda info, *_: seen.append(info))
+            >>> s = torch.tensor([[0.2, 0.9, 0.5, 0.5]], dtype=torch.float64)
+            >>> _ = agent.begin(s); _ = agent.observe(s, torch.tensor([-1.0]))
+            >>> handle.remove(); _ = agent.observe(s, torch.tensor([-1.0]))
+            >>> len(seen), sorted(seen[0])[:2]
+            (1, ['decision', 'decision_ended'])
+        """
+        handle = RemovableHandle(self._transition_hooks)
+        self._transition_hooks[handle.id] = hook
+        return handle
+
     def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
         """Learn from a step in which no episode ended; the next actions ``[n]``."""
         none = torch.zeros_like(self.active)
-        self.transition(self._full(obs, self.obs), self._full(reward, self.decision_return),
-                        none, none, self.active)
+        next_obs = self._full(obs, self.obs)
+        info = self.transition(next_obs, self._full(reward, self.decision_return), none, none,
+                               self.active)  # fmt: skip
+        for hook in self._transition_hooks.values():
+            hook(info, next_obs, none, self.active)
         return self.actions
 
     def observe_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
@@ -782,8 +811,11 @@ class HierarchicalAgent(nn.Module):
         ``start_obs``."""
         none = torch.zeros_like(self.active)
         terminated, truncated = self._full(terminated, none), self._full(truncated, none)
-        self.transition(self._full(obs, self.obs), self._full(reward, self.decision_return),
-                        terminated, truncated, self.active)
+        next_obs = self._full(obs, self.obs)
+        info = self.transition(next_obs, self._full(reward, self.decision_return), terminated,
+                               truncated, self.active)  # fmt: skip
+        for hook in self._transition_hooks.values():
+            hook(info, next_obs, terminated, self.active)
         self.episodes_ended(self.active & (terminated | truncated))
         if restart_rows.numel() > 0:
             restart = torch.zeros_like(self.active)

@@ -91,8 +91,9 @@ class OptionMonitor:
 
     Use :meth:`register` with a :class:`PopulationTrainer` (it attaches to ``trainer.agent``),
     or :meth:`attach` an agent yourself and call :meth:`end_episodes` when episodes end.
-    Counting by step wraps the agent's ``transition`` method (instance attribute; :meth:`detach`
-    restores it), because the trainer has no per-step hook.
+    Counting by step registers a hook on the agent
+    (:meth:`~skillchain_torch.agents.HierarchicalAgent.register_transition_hook`; :meth:`detach`
+    removes it).
     """
 
     def __init__(self, logger=None, probe_resolution: int = 12, image_every: int = 10,
@@ -262,7 +263,7 @@ class OptionMonitor:
     # ------------------------------------------------------------------ counting
     def attach(self, agent) -> OptionMonitor:
         """Start counting ``agent``'s transitions (it needs ``bank``, ``events``, ``contains``,
-        ``max_option_steps`` and ``transition``, as :class:`HierarchicalAgent`)."""
+        ``max_option_steps`` and ``register_transition_hook``, as :class:`HierarchicalAgent`)."""
         if self.agent is not None:
             raise RuntimeError("this monitor is already attached to an agent")
         if not isinstance(getattr(agent, "bank", None), OptionBank):
@@ -292,24 +293,23 @@ class OptionMonitor:
         self._kept = counts if self.counting != "step" else None
         if self._kept is not None:  # the agent counts: nothing to do per step
             return self
-        original = agent.transition
+        if not callable(getattr(agent, "register_transition_hook", None)):
+            raise TypeError(f"counting='step' needs an agent with register_transition_hook "
+                            f"(HierarchicalAgent); {type(agent).__name__} has none")
 
-        def transition(next_obs, reward, terminated, truncated, stepped):
-            info = original(next_obs, reward, terminated, truncated, stepped)
+        def count(info, next_obs, terminated, stepped):
             start = time.perf_counter()
             self._count(info, next_obs, terminated, stepped)
             self.seconds += time.perf_counter() - start
-            return info
 
-        self._original = original
-        agent.transition = transition
+        self._hook = agent.register_transition_hook(count)
         return self
 
     def detach(self) -> None:
-        """Stop counting (the agent's own ``transition`` is restored)."""
+        """Stop counting (the agent's transition hook is removed)."""
         if self.agent is not None:
             if self._kept is None:
-                del self.agent.transition  # the instance attribute; the method shows through
+                self._hook.remove()
             self.agent = None
 
     @property
