@@ -185,7 +185,10 @@ class EpisodeAgent(Protocol):
     The trainer calls :meth:`begin` at the start observations, then :meth:`observe` after each
     step in which no episode ended, or :meth:`observe_ends` after one in which some did (terminal
     updates do not bootstrap, truncated ones do; ``restart_rows`` then start again at
-    ``start_obs``), and :meth:`compact` when agents finish their last episode.
+    ``start_obs``), and :meth:`compact` when agents finish their last episode. An agent run
+    with an exploration schedule (``TrainConfig.epsilon_init``) also needs
+    ``set_epsilon(epsilon)``, which the collector calls each population step; the built-in
+    agents have it, and the collector refuses an agent without it in one line.
 
     Attributes:
         population (P).

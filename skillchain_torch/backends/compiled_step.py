@@ -31,7 +31,7 @@ AVAILABLE = kernels.AVAILABLE
 class CompiledStep:
     """The compiled calls of a :class:`~skillchain_torch.agents.HierarchicalAgent` (see the
     module docstring); stateless: every call reads the agent it is given and returns what it
-    computed; the agent adopts it (it writes no attribute of the agent)."""
+    computed, which the agent adopts (no attribute of the agent is written here)."""
 
     @staticmethod
     def decide(agent, phi: Tensor, available: Tensor, rows: Tensor,
@@ -63,8 +63,9 @@ class CompiledStep:
     def transition(cls, agent, next_obs: Tensor, reward: Tensor, terminated: Tensor,
                    truncated: Tensor, stepped: Tensor, contains_next: Tensor, reached: Tensor,
                    uniforms: Tensor, own_next: Tensor) -> tuple:  # fmt: skip
-        """The rest of ``HierarchicalAgent.transition`` in one pass. It reads the agent and
-        writes nothing: it returns ``(state, phi, q, value, started, info)``, the new
+        """The rest of ``HierarchicalAgent.transition`` in one pass. It writes no attribute of
+        the agent (the kernel updates the weights and three state arrays in place, as the torch
+        path does): it returns ``(state, phi, q, value, started, info)``, the new
         :class:`~skillchain_torch.agents.step_state.StepState`, the top level's features and
         values at s' (``value``: Q(s', d) of the decision in force, where the agent wants it),
         the rows that started an option, and the same monitoring dict as the torch path, for

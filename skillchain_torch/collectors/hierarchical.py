@@ -163,6 +163,19 @@ class HierarchicalCollector:
         self._start = torch.zeros(self.population, dtype=torch.int64, device=device)
         self.started = True
 
+    @property
+    def agent(self):
+        """The agents this collector drives (assigning one replaces them)."""
+        return self._agent
+
+    @agent.setter
+    def agent(self, agent) -> None:
+        # The schedule reaches the agent through its declared method, checked here once.
+        if self.epsilon is not None and not callable(getattr(agent, "set_epsilon", None)):
+            raise ValueError(f"an exploration schedule (epsilon_init) anneals the agent, but "
+                             f"{type(agent).__name__} has no set_epsilon(epsilon) method")
+        self._agent = agent
+
     def __iter__(self) -> Iterator[TensorDict]:
         if not self.started:
             self.start()

@@ -144,7 +144,7 @@ class OptionBank(nn.Module):
             >>> bank.learned_on("pinball_simple_single"); bank.environment()["map"]
             'pinball_simple_single'
         """
-        if self.map is None and not self.legacy:
+        if map is not None and self.map is None and not self.legacy:
             self.map = str(map)
 
     def feature_settings(self) -> dict[str, Any]:

@@ -42,7 +42,8 @@ def add_neural_arguments(parser: argparse.ArgumentParser) -> None:
                         help="--top-head mlp: TD target over the next decisions, max (DQN's, "
                         "default) or the one taken (sarsa, the paper's rule)")  # fmt: skip
     parser.add_argument("--epsilon-init", type=float, default=None, metavar="EPS",
-                        help="skill chaining: explore at EPS at the first step, annealed "
+                        help="explore at EPS at the first step (the top level, for skill "
+                        "chaining and given options), annealed "
                         "linearly to --epsilon over --annealing-steps agent steps (default: "
                         "--epsilon throughout, as the paper; neural heads need it)")  # fmt: skip
     parser.add_argument("--annealing-steps", type=int, default=None, metavar="N",

@@ -160,9 +160,10 @@ class TrainConfig:
         top_lr, top_target_update, top_bootstrap: the ``"mlp"`` top level's learner: Adam's
             step size, optimizer steps between target copies, ``"max"`` (DQN's target) or
             ``"sarsa"`` (:data:`~skillchain_torch.presets.TOP_LEARNER`).
-        epsilon_init, annealing_steps: skill chaining's top level explores at ``epsilon_init``
-            at its first step, annealed linearly to ``epsilon`` over ``annealing_steps`` agent
-            steps (:class:`~skillchain_torch.policies.LinearEpsilon`); ``None``: ``epsilon``
+        epsilon_init, annealing_steps: the agent (skill chaining's and given options' top level,
+            flat's policy) explores at ``epsilon_init`` at its first step, annealed linearly to
+            ``epsilon`` over ``annealing_steps`` agent steps
+            (:class:`~skillchain_torch.policies.LinearEpsilon`); ``None``: ``epsilon``
             throughout, as the paper.
         checkpoint_every: write a checkpoint each time the slowest agent completes a multiple of
             this many episodes (0: only at the end).

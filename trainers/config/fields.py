@@ -41,8 +41,9 @@ _DISCOVERY_FIELDS = ("slots", "initiation_bias", "initiation_centered", "gestati
 # The "mlp" top level's learner: a run whose top level is the built-in Fourier head never reads
 # them (so a saved Fourier run stays valid when the paper preset's MLP learner values change).
 MLP_TOP_FIELDS = ("top_lr", "top_target_update", "top_bootstrap")
-_PIECES = ("top_head", "option_head", "initiation", *MLP_TOP_FIELDS, "epsilon_init",
-           "annealing_steps")
+# (epsilon_init and annealing_steps are read by every kind: the trainer anneals any agent's
+# exploration through its set_epsilon.)
+_PIECES = ("top_head", "option_head", "initiation", *MLP_TOP_FIELDS)
 UNREAD_FIELDS = {
     "flat": _DISCOVERY_FIELDS + _PIECES + ("options", "options_agent", "failure_bootstrap", "goal",
                                            "max_option_steps",

@@ -202,13 +202,10 @@ class PopulationTrainer:
             agent = make_agent(config, device=self.device, native=native)
         else:
             check_agent(agent, config)
-        # Skill chaining's top level may anneal its exploration (neural heads need it); agents
-        # step once per population step while active, so the schedule reads global_step.
+        # Any agent may anneal its exploration through set_epsilon (neural heads need it);
+        # agents step once per population step while active, so the schedule reads global_step.
         self._epsilon = (None if config.epsilon_init is None else LinearEpsilon(
             config.epsilon_init, config.epsilon, config.annealing_steps))  # fmt: skip
-        if self._epsilon is not None and not callable(getattr(agent, "set_epsilon", None)):
-            raise ValueError(f"epsilon_init anneals the agent's exploration, but "
-                             f"{type(agent).__name__} has no set_epsilon(epsilon) method")
         # The loop: the collector steps the envs and the agents, and hands over a batch at
         # every step in which episodes ended (records, hooks and checkpoints go between).
         self.collector = HierarchicalCollector(self.stepper, agent, episodes=config.episodes,

@@ -268,6 +268,14 @@ class OptionMonitor:
             raise RuntimeError("this monitor is already attached to an agent")
         if not isinstance(getattr(agent, "bank", None), OptionBank):
             raise TypeError("the agent has no option bank to monitor")
+        counts = getattr(getattr(agent, "discovery", None), "counts", None)
+        if self.counting == "agent" and counts is None:
+            raise ValueError("counting='agent' needs an agent whose discovery keeps counts "
+                             "(SkillChainingAgent)")  # fmt: skip
+        if (self.counting == "step" or counts is None) and not callable(
+                getattr(agent, "register_transition_hook", None)):  # fmt: skip
+            raise TypeError(f"counting by step needs an agent with register_transition_hook "
+                            f"(HierarchicalAgent); {type(agent).__name__} has none")
         self.agent = agent
         P, K = agent.bank.population, agent.bank.slots
         device = agent.bank.status.device
@@ -286,16 +294,9 @@ class OptionMonitor:
         self.successes = torch.zeros(P, K, **zeros)
         self.timeouts = torch.zeros(P, K, **zeros)
         self._slots = torch.arange(K, device=device)
-        counts = getattr(getattr(agent, "discovery", None), "counts", None)
-        if self.counting == "agent" and counts is None:
-            raise ValueError("counting='agent' needs an agent whose discovery keeps counts "
-                             "(SkillChainingAgent)")  # fmt: skip
         self._kept = counts if self.counting != "step" else None
         if self._kept is not None:  # the agent counts: nothing to do per step
             return self
-        if not callable(getattr(agent, "register_transition_hook", None)):
-            raise TypeError(f"counting='step' needs an agent with register_transition_hook "
-                            f"(HierarchicalAgent); {type(agent).__name__} has none")
 
         def count(info, next_obs, terminated, stepped):
             start = time.perf_counter()

@@ -54,7 +54,7 @@ def main() -> None:
 
     def anneal(trainer, batch=None):
         done = float(trainer.episodes_done.mean())
-        trainer.agent.epsilon = eps1 + (eps0 - eps1) * max(0.0, 1 - done / decay_episodes)
+        trainer.agent.set_epsilon(eps1 + (eps0 - eps1) * max(0.0, 1 - done / decay_episodes))
 
     anneal(trainer)
     trainer.register_op("post_episodes", anneal)
