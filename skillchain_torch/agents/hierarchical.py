@@ -528,11 +528,17 @@ class HierarchicalAgent(nn.Module):
     def _value_in_force(self, stepped: Tensor, decision_ended: Tensor) -> Tensor:
         """``[P]``: ``Q(s', d)`` of the decision in force after the step. New decisions were
         valued before this step's update; an agent going on with its option had no update this
-        step, so its value now is the value then."""
-        value = self.last_q.gather(1, self.decision[:, None])[:, 0]
-        going_on = (stepped & ~decision_ended).nonzero()[:, 0]
-        if going_on.numel() > 0:
-            value[going_on] = self.q_head.q_value(self.last_phi, self.decision, going_on)
+        step, so its value now is the value then.
+
+        A value, not a graph: it is kept from step to step (``q_decision``, merged with
+        ``torch.where`` while some agents no longer step), so a value that carried a neural
+        head's autograd graph would chain one graph onto the next and hold every step's
+        activations (23 GB within half an hour on Pinball)."""
+        with torch.no_grad():
+            value = self.last_q.gather(1, self.decision[:, None])[:, 0]
+            going_on = (stepped & ~decision_ended).nonzero()[:, 0]
+            if going_on.numel() > 0:
+                value[going_on] = self.q_head.q_value(self.last_phi, self.decision, going_on)
         return value
 
     def extra_repr(self) -> str:

@@ -200,3 +200,23 @@ def test_a_learner_saved_with_the_shared_memory_is_refused_in_one_line():
         with pytest.raises(ValueError, match="^this checkpoint's replay memory is shared by the "
                                              "population .*without --resume$"):  # fmt: skip
             learner.load_state_dict(old)
+
+
+def test_the_value_in_force_carries_no_graph_from_step_to_step():
+    """Q(s', d) of the decision in force is kept from step to step (q_decision, merged by
+    torch.where once some agents stop stepping). With a neural head it carried the head's
+    autograd graph, so each step's graph chained onto the last and held its activations: a
+    neural Pinball run grew to 23 GB. It is a value now."""
+    cfg = TrainConfig(agent="skill-chaining", map="pinball_box", runs=3, episodes=2,
+                      max_episode_steps=100, seed=0, top_head="mlp", option_head="mlp",
+                      initiation="mlp")  # fmt: skip
+    trainer = PopulationTrainer(cfg)
+    trainer.train(max_agent_steps=30)
+    agent = trainer.agent
+    assert any(p.requires_grad for p in agent.q_head.parameters())  # a head that could leak
+    stepped = torch.tensor([True, True, False])
+    going_on = torch.zeros(3, dtype=torch.bool)  # every stepped agent goes on with its decision
+    value = agent._value_in_force(stepped, going_on)  # so the head values them again
+    assert not value.requires_grad and value.grad_fn is None
+    trainer.train()
+    assert agent.q_decision.grad_fn is None
