@@ -59,7 +59,7 @@ from skillchain_torch.envs.pinball import NUM_ACTIONS
 from skillchain_torch.features import FourierBasis
 from skillchain_torch.modules import LinearQHead
 from skillchain_torch.objectives import SarsaUpdate
-from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy, epsilon_greedy
+from skillchain_torch.policies import NUM_UNIFORMS, EpsilonGreedy, checked_epsilon, epsilon_greedy
 from skillchain_torch.rng import CounterRNG
 
 if TYPE_CHECKING:  # the run config is the trainers' (an agent reads only its fields)
@@ -153,9 +153,7 @@ class FlatSarsaAgent(nn.Module):
             >>> agent.set_epsilon(0.5); agent.policy.epsilon
             0.5
         """
-        if not 0.0 <= epsilon <= 1.0:
-            raise ValueError(f"epsilon must be in [0, 1], got {epsilon}")
-        self.policy.epsilon = float(epsilon)
+        self.policy.epsilon = checked_epsilon(epsilon)
 
     # ------------------------------------------------------------------ pieces
     def featurize(self, obs: Tensor) -> Tensor:

@@ -112,7 +112,7 @@ from skillchain_torch.options import (
 )
 from skillchain_torch.options.goals import goal_event
 from skillchain_torch.options.termination import evaluate_base_events
-from skillchain_torch.policies import epsilon_greedy
+from skillchain_torch.policies import checked_epsilon, epsilon_greedy
 from skillchain_torch.presets import (
     PRESET_FIELDS,
     Preset,
@@ -803,12 +803,18 @@ class HierarchicalAgent(nn.Module):
     def observe(self, obs: Tensor, reward: Tensor) -> Tensor:
         """Learn from a step in which no episode ended; the next actions ``[n]``."""
         none = torch.zeros_like(self.active)
-        next_obs = self._full(obs, self.obs)
-        info = self.transition(next_obs, self._full(reward, self.decision_return), none, none,
-                               self.active)  # fmt: skip
-        for hook in self._transition_hooks.values():
-            hook(info, next_obs, none, self.active)
+        self._learn_step(obs, reward, none, none)
         return self.actions
+
+    def _learn_step(self, obs: Tensor, reward: Tensor, terminated: Tensor,
+                    truncated: Tensor) -> None:  # fmt: skip
+        """:meth:`transition` of every active row (compact ``obs``/``reward`` widened to
+        ``[P]``), then the registered transition hooks."""
+        next_obs = self._full(obs, self.obs)
+        info = self.transition(next_obs, self._full(reward, self.decision_return), terminated,
+                               truncated, self.active)  # fmt: skip
+        for hook in self._transition_hooks.values():
+            hook(info, next_obs, terminated, self.active)
 
     def observe_ends(self, obs: Tensor, reward: Tensor, terminated: Tensor, truncated: Tensor,
                      restart_rows: Tensor, start_obs: Tensor | None) -> Tensor:
@@ -817,11 +823,7 @@ class HierarchicalAgent(nn.Module):
         ``start_obs``."""
         none = torch.zeros_like(self.active)
         terminated, truncated = self._full(terminated, none), self._full(truncated, none)
-        next_obs = self._full(obs, self.obs)
-        info = self.transition(next_obs, self._full(reward, self.decision_return), terminated,
-                               truncated, self.active)  # fmt: skip
-        for hook in self._transition_hooks.values():
-            hook(info, next_obs, terminated, self.active)
+        self._learn_step(obs, reward, terminated, truncated)
         self.episodes_ended(self.active & (terminated | truncated))
         if restart_rows.numel() > 0:
             restart = torch.zeros_like(self.active)
@@ -878,9 +880,7 @@ class HierarchicalAgent(nn.Module):
             >>> agent.set_epsilon(0.5); agent.epsilon
             0.5
         """
-        if not 0.0 <= epsilon <= 1.0:
-            raise ValueError(f"epsilon must be in [0, 1], got {epsilon}")
-        self.epsilon = float(epsilon)
+        self.epsilon = checked_epsilon(epsilon)
 
     # ------------------------------------------------------------------ state
     _EPISODE = ("obs", "contains", "own_contains", "decision", "option", "decision_return",

@@ -6,7 +6,7 @@ from skillchain_torch.policies.epsilon_greedy import (
     EpsilonGreedyModule,
     epsilon_greedy,
 )
-from skillchain_torch.policies.epsilon_schedule import LinearEpsilon
+from skillchain_torch.policies.epsilon_schedule import LinearEpsilon, checked_epsilon
 
 __all__ = ["NUM_UNIFORMS", "EpsilonGreedy", "EpsilonGreedyModule", "epsilon_greedy",
-           "LinearEpsilon"]
+           "LinearEpsilon", "checked_epsilon"]

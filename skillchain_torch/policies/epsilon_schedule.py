@@ -20,7 +20,18 @@ Example:
 
 from __future__ import annotations
 
-__all__ = ["LinearEpsilon"]
+__all__ = ["LinearEpsilon", "checked_epsilon"]
+
+
+def checked_epsilon(value: float, name: str = "epsilon") -> float:
+    """``value`` as a float, or ``ValueError`` naming ``name`` unless it is in [0, 1].
+
+    >>> checked_epsilon(0.5), checked_epsilon(1)
+    (0.5, 1.0)
+    """
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"{name} must be in [0, 1], got {value}")
+    return float(value)
 
 
 class LinearEpsilon:
@@ -34,12 +45,10 @@ class LinearEpsilon:
     """
 
     def __init__(self, eps_init: float, eps_end: float, annealing_num_steps: int):
-        for name, value in (("eps_init", eps_init), ("eps_end", eps_end)):
-            if not 0.0 <= value <= 1.0:
-                raise ValueError(f"{name} must be in [0, 1], got {value}")
+        self.eps_init = checked_epsilon(eps_init, "eps_init")
+        self.eps_end = checked_epsilon(eps_end, "eps_end")
         if annealing_num_steps < 1:
             raise ValueError(f"annealing_num_steps must be >= 1, got {annealing_num_steps}")
-        self.eps_init, self.eps_end = float(eps_init), float(eps_end)
         self.annealing_num_steps = int(annealing_num_steps)
 
     def __call__(self, step: int) -> float:
